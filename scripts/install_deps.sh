@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# Installs every Debian package the workspace needs to build, test, run and benchmark.
+# One list, one place. Uses sudo when not root. Safe to run again.
+set -euo pipefail
+export DEBIAN_FRONTEND=noninteractive
+
+PACKAGES=(
+  # build tools
+  build-essential cmake colcon python3-colcon-ros python3-colcon-cmake python3-colcon-bash
+  python3-colcon-test-result python3-colcon-output python3-colcon-package-selection
+  python3-colcon-parallel-executor python3-colcon-library-path python3-colcon-metadata
+  python3-colcon-defaults python3-colcon-recursive-crawl
+  # ROS 1 (Debian packaging)
+  ros-core-dev ros-desktop-dev librosbag-dev libtf2-ros-dev python3-rostest librostest-dev
+  ros-robot-state-publisher librobot-state-publisher-dev joint-state-publisher
+  libnodeletlib-dev libnodelet-dev libnodeletlib-tools rviz
+  # description: URDF parsing and KDL forward kinematics
+  liburdfdom-dev liburdfdom-tools libkdl-parser-dev liborocos-kdl-dev
+  # simulation
+  libmujoco-dev libmujoco-samples libqhull-dev
+  # numerics, config, testing, benchmarks
+  libeigen3-dev libyaml-cpp-dev libgtest-dev libgmock-dev libbenchmark-dev
+  # screenshots of rviz under a virtual display
+  xvfb x11-apps imagemagick
+)
+
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+
+missing=()
+for p in "${PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ "${#missing[@]}" -eq 0 ]; then
+  echo "install_deps: all ${#PACKAGES[@]} packages present"
+  exit 0
+fi
+echo "install_deps: installing ${#missing[@]} packages: ${missing[*]}"
+$SUDO apt-get update -qq
+$SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"

@@ -1,0 +1,42 @@
+#include "adroit_description/scenes.h"
+
+#include <algorithm>
+#include <fstream>
+#include <stdexcept>
+
+namespace adroit {
+namespace description {
+
+std::vector<std::string> sceneNames(const std::string& share_dir) {
+  const std::string path = share_dir + "/scenes.txt";
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error("cannot read scene list '" + path + "'");
+  std::vector<std::string> names;
+  for (std::string line; std::getline(in, line);) {
+    if (!line.empty()) names.push_back(line);
+  }
+  return names;
+}
+
+namespace {
+void requireScene(const std::string& share_dir, const std::string& scene) {
+  const auto names = sceneNames(share_dir);
+  if (std::find(names.begin(), names.end(), scene) != names.end()) return;
+  std::string known;
+  for (const auto& n : names) known += (known.empty() ? "" : ", ") + n;
+  throw std::invalid_argument("unknown scene '" + scene + "' (known: " + known + ")");
+}
+}  // namespace
+
+std::string sceneFile(const std::string& share_dir, const std::string& scene, bool planning) {
+  requireScene(share_dir, scene);
+  return share_dir + "/mjcf/" + scene + (planning ? "_planning" : "") + ".xml";
+}
+
+std::string urdfFile(const std::string& share_dir, const std::string& scene) {
+  requireScene(share_dir, scene);
+  return share_dir + "/urdf/" + scene + ".urdf";
+}
+
+}  // namespace description
+}  // namespace adroit

@@ -1,0 +1,221 @@
+// Every scene compiles in MuJoCo 2.2.2 without warnings, has the expected sizes and names,
+// simulates without runtime warnings, and bad input fails with one clear line.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <fstream>
+#include <set>
+
+#include "adroit_core/model_tables.h"
+#include "adroit_description/cylinders.h"
+#include "test_helpers.h"
+
+using adroit_test::expectedScenes;
+using adroit_test::loadScene;
+
+TEST(Scenes, ListMatchesTheIssue) {
+  const auto names = adroit::description::sceneNames(adroit_test::shareDir());
+  std::set<std::string> got(names.begin(), names.end());
+  for (const auto& s : expectedScenes()) EXPECT_TRUE(got.count(s.name)) << s.name;
+}
+
+TEST(Scenes, EveryVariantLoadsCleanWithExpectedCounts) {
+  for (const auto& facts : expectedScenes()) {
+    for (bool planning : {false, true}) {
+      SCOPED_TRACE(facts.name + (planning ? " (planning)" : ""));
+      auto loaded = loadScene(facts.name, planning);
+      EXPECT_TRUE(loaded.warning.empty()) << loaded.warning;
+      const mjModel* m = loaded.model.get();
+      const int dof = facts.arm ? 28 : 24;
+      const int cylinders = facts.arm ? 48 : 40;
+      const int object_nv = facts.object_qpos == 7 ? 6 : facts.object_qpos;
+      EXPECT_EQ(m->nq, dof + facts.object_qpos);
+      EXPECT_EQ(m->nv, dof + object_nv);
+      EXPECT_EQ(m->nu, cylinders);
+      EXPECT_EQ(m->ntendon, cylinders + 4);  // + the four DIP-PIP couplers
+      EXPECT_DOUBLE_EQ(m->opt.timestep, 0.002);
+    }
+  }
+}
+
+TEST(Scenes, NamesOfJointsTendonsSensorsAndSites) {
+  auto loaded = loadScene("arm_hand");
+  adroit::ModelTables t(loaded.model.get());
+  for (const auto& j : adroit_test::handJoints()) {
+    EXPECT_TRUE(t.joints.contains(j)) << j;
+    EXPECT_TRUE(t.sensors.contains("JP_" + j)) << j;
+    EXPECT_TRUE(t.sensors.contains("JV_" + j)) << j;
+  }
+  for (const char* j : {"ARJ3", "ARJ2", "ARJ1", "ARJ0"}) EXPECT_TRUE(t.joints.contains(j)) << j;
+  // Every independently actuated joint has an antagonistic pair; the DIPs (J0) have none.
+  int pairs = 0;
+  for (const auto& j : t.joints.names()) {
+    const bool coupled = j.size() == 4 && j[1] == 'F' && j[3] == '0' && j[0] != 'T';
+    const bool has_flex = t.tendons.contains("T_" + j + "_flex");
+    const bool has_ext = t.tendons.contains("T_" + j + "_ext");
+    EXPECT_EQ(has_flex, !coupled) << j;
+    EXPECT_EQ(has_ext, !coupled) << j;
+    if (has_flex && has_ext) {
+      ++pairs;
+      for (const char* prefix : {"TL_", "TV_", "AF_"}) {
+        EXPECT_TRUE(t.sensors.contains(prefix + j + "_flex")) << prefix << j;
+      }
+      EXPECT_TRUE(t.actuators.contains("A_" + j + "_ext")) << j;
+    }
+  }
+  EXPECT_EQ(pairs, 24);  // 20 hand + 4 arm
+  for (const char* f : {"ff", "mf", "rf", "lf", "th"}) {
+    EXPECT_TRUE(t.sites.contains(std::string("S_") + f + "tip")) << f;
+    EXPECT_TRUE(t.sensors.contains(std::string("ST_") + f + "tip")) << f;
+  }
+  EXPECT_TRUE(t.sensors.contains("ST_palm"));
+  for (const char* f : {"FF", "MF", "RF", "LF"}) EXPECT_TRUE(t.tendons.contains(std::string("T_") + f + "J1c"));
+}
+
+TEST(Scenes, ActuatorsArePullOnlyCylinders) {
+  auto loaded = loadScene("arm_hand");
+  const mjModel* m = loaded.model.get();
+  const auto cylinders = adroit::description::cylinderTable(m);
+  ASSERT_EQ(cylinders.size(), 48u);
+  std::map<std::string, int> types;
+  for (const auto& c : cylinders) {
+    types[c.type]++;
+    EXPECT_EQ(m->actuator_ctrlrange[2 * c.actuator], 0.0) << c.name << " must be pull-only";
+    EXPECT_GT(c.max_tension, 0) << c.name;
+    // Max tension is the supply pressure (about 620 kPa abs, thesis fig. 5.9) over the bore.
+    EXPECT_NEAR(c.max_tension, (620e3 - 101325.0) * c.bore_area, 1.0) << c.name;
+  }
+  // Thesis 3.5.2: 36 M9 finger cylinders and 4 M16 wrist cylinders in the hand.
+  EXPECT_EQ(types["M9"], 36);
+  EXPECT_EQ(types["M16"], 4);
+  for (const auto& c : cylinders) {
+    if (c.type == "M9") {
+      EXPECT_DOUBLE_EQ(c.bore_diameter, 0.009);
+      EXPECT_DOUBLE_EQ(c.stroke, 0.0375);
+    }
+    if (c.type == "M16") {
+      EXPECT_DOUBLE_EQ(c.bore_diameter, 0.016);
+      EXPECT_DOUBLE_EQ(c.stroke, 0.050);
+    }
+  }
+}
+
+TEST(Scenes, PlanningVariantHasTable61SpringsAndArmature) {
+  auto sim = loadScene("arm_hand", false);
+  auto plan = loadScene("arm_hand", true);
+  adroit::ModelTables t(plan.model.get());
+  auto stiffness = [&](const char* j) { return plan.model->jnt_stiffness[t.joints.at(j)]; };
+  auto armature = [&](const mjModel* m, const char* j) { return m->dof_armature[m->jnt_dofadr[t.joints.at(j)]]; };
+  // Thesis Table 6.1.
+  EXPECT_DOUBLE_EQ(stiffness("FFJ3"), 0.20);
+  EXPECT_DOUBLE_EQ(stiffness("FFJ1"), 0.10);
+  EXPECT_DOUBLE_EQ(stiffness("FFJ0"), 0.15);
+  EXPECT_DOUBLE_EQ(stiffness("LFJ4"), 0.15);
+  EXPECT_DOUBLE_EQ(stiffness("ARJ2"), 0.0);
+  EXPECT_DOUBLE_EQ(armature(plan.model.get(), "ARJ2"), 2.40);
+  EXPECT_DOUBLE_EQ(armature(plan.model.get(), "ARJ3"), 0.60);
+  EXPECT_DOUBLE_EQ(armature(plan.model.get(), "THJ0"), 0.06);
+  EXPECT_DOUBLE_EQ(sim.model->jnt_stiffness[t.joints.at("FFJ3")], 0.0);
+  EXPECT_LT(armature(sim.model.get(), "THJ0"), 0.01);
+}
+
+TEST(Scenes, SimulatesWithoutRuntimeWarnings) {
+  for (const auto& facts : expectedScenes()) {
+    SCOPED_TRACE(facts.name);
+    auto loaded = loadScene(facts.name);
+    const mjModel* m = loaded.model.get();
+    adroit::DataPtr d = adroit::makeData(m);
+    const int key = mj_name2id(m, mjOBJ_KEY, "home");
+    ASSERT_GE(key, 0);
+    mj_resetDataKeyframe(m, d.get(), key);
+    for (int i = 0; i < 1000; ++i) mj_step(m, d.get());  // 2 s, zero tension
+    EXPECT_EQ(adroit::warningCount(d.get()), 0) << adroit::warningSummary(d.get());
+    for (int i = 0; i < m->nq; ++i) ASSERT_TRUE(std::isfinite(d->qpos[i]));
+  }
+}
+
+TEST(Scenes, KeypadKeysAreSpringLoaded) {
+  auto loaded = loadScene("keypad");
+  const mjModel* m = loaded.model.get();
+  adroit::DataPtr d = adroit::makeData(m);
+  const int key = mj_name2id(m, mjOBJ_JOINT, "KEY_5");
+  ASSERT_GE(key, 0);
+  const int depth_id = mj_name2id(m, mjOBJ_NUMERIC, "keypad_press_depth");
+  ASSERT_GE(depth_id, 0);
+  const double press_depth = m->numeric_data[m->numeric_adr[depth_id]];
+  const int dof = m->jnt_dofadr[key];
+  // Push the key down with 2 N: it bottoms out, deeper than the press depth.
+  for (int i = 0; i < 500; ++i) {
+    d->qfrc_applied[dof] = -2.0;
+    mj_step(m, d.get());
+  }
+  EXPECT_LT(d->qpos[m->jnt_qposadr[key]], -press_depth);
+  // A light touch (0.2 N, below the spring preload) does not register.
+  for (int i = 0; i < 500; ++i) {
+    d->qfrc_applied[dof] = -0.2;
+    mj_step(m, d.get());
+  }
+  EXPECT_GT(d->qpos[m->jnt_qposadr[key]], -press_depth);
+  // Released, the spring returns it to the top.
+  for (int i = 0; i < 500; ++i) {
+    d->qfrc_applied[dof] = 0;
+    mj_step(m, d.get());
+  }
+  EXPECT_GT(d->qpos[m->jnt_qposadr[key]], -0.0005);
+}
+
+TEST(BadInput, UnknownSceneNamesTheKnownOnes) {
+  try {
+    adroit::description::sceneFile(adroit_test::shareDir(), "kitchen");
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("'kitchen'"), std::string::npos);
+    EXPECT_NE(std::string(e.what()).find("arm_hand"), std::string::npos);
+  }
+}
+
+namespace {
+struct CliRun {
+  int status;
+  std::string output;
+};
+CliRun runReport(const std::string& args) {
+  const std::string cmd = std::string(SCENE_REPORT_BIN) + " " + args + " 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  std::string out;
+  char buf[512];
+  while (p && fgets(buf, sizeof buf, p)) out += buf;
+  const int status = p ? pclose(p) : -1;
+  return {WEXITSTATUS(status), out};
+}
+int lines(const std::string& s) { return static_cast<int>(std::count(s.begin(), s.end(), '\n')); }
+}  // namespace
+
+TEST(BadInput, ReportRefusesUnknownSceneWithOneLine) {
+  const CliRun r = runReport("--dir " + adroit_test::shareDir() + " --scene kitchen");
+  EXPECT_NE(r.status, 0);
+  EXPECT_EQ(lines(r.output), 1) << r.output;
+  EXPECT_NE(r.output.find("unknown scene 'kitchen'"), std::string::npos) << r.output;
+}
+
+TEST(BadInput, ReportQuotesMujocoOnMalformedOrMissingFile) {
+  char dir[] = "/tmp/adroit_desc_test_XXXXXX";
+  ASSERT_NE(mkdtemp(dir), nullptr);
+  const std::string d(dir);
+  std::system(("mkdir -p " + d + "/mjcf").c_str());
+  std::ofstream(d + "/scenes.txt") << "broken\nmissing\n";
+  std::ofstream(d + "/mjcf/broken.xml") << "<mujoco><worldbody><body><geom type='sphere' size='x'/>";
+  CliRun r = runReport("--dir " + d + " --scene broken");
+  EXPECT_NE(r.status, 0);
+  EXPECT_EQ(lines(r.output), 1) << r.output;
+  EXPECT_NE(r.output.find(d + "/mjcf/broken.xml"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("Error"), std::string::npos) << "MuJoCo's own message expected: " << r.output;
+  r = runReport("--dir " + d + " --scene missing");
+  EXPECT_NE(r.status, 0);
+  EXPECT_EQ(lines(r.output), 1) << r.output;
+  EXPECT_NE(r.output.find(d + "/mjcf/missing.xml"), std::string::npos) << r.output;
+  r = runReport("--seconds -1");
+  EXPECT_NE(r.status, 0);
+  EXPECT_EQ(lines(r.output), 1) << r.output;
+  std::system(("rm -rf " + d).c_str());
+}

@@ -1,0 +1,22 @@
+#!/usr/bin/env bash
+# Builds the workspace and runs every benchmark program. Each prints its tables next to a
+# baseline measured in the same run and ends with RESULT lines (DESIGN.md section 5):
+#   RESULT <package>/<figure> <value> <unit> target <op> <value> PASS|FAIL
+# Run it on an otherwise idle machine.
+set -euo pipefail
+here="$(cd "$(dirname "$0")" && pwd)"
+source "$here/env.sh"
+cd "$WS_ROOT"
+"$here/install_deps.sh" >/dev/null
+"$here/build.sh" >/dev/null
+source_workspace
+mkdir -p "$WS_ROOT/log/bench"
+run() {
+  echo "== $* =="
+  "$@" 2>&1 | tee -a "$WS_ROOT/log/bench/all.txt"
+  echo
+}
+: > "$WS_ROOT/log/bench/all.txt"
+run "$WS_ROOT/install/lib/adroit_description/scene_report" --testspeed --seconds 10
+echo "== summary =="
+grep '^RESULT' "$WS_ROOT/log/bench/all.txt"

@@ -17,6 +17,6 @@ run() {
   echo
 }
 : > "$WS_ROOT/log/bench/all.txt"
-run "$WS_ROOT/install/lib/adroit_description/scene_report" --testspeed --seconds 10
+run rosrun adroit_description scene_report --testspeed --seconds 10
 echo "== summary =="
 grep '^RESULT' "$WS_ROOT/log/bench/all.txt"

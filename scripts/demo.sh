@@ -11,5 +11,4 @@ cd "$WS_ROOT"
 source_workspace
 echo
 echo "== ADROIT scenes, 3 simulated seconds each, zero tendon tension =="
-scene_report="$WS_ROOT/install/lib/adroit_description/scene_report"
-"$scene_report" --seconds 3
+rosrun adroit_description scene_report --seconds 3

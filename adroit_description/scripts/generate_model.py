@@ -450,14 +450,14 @@ def keypad_xml():
     for i, label in enumerate(labels):
         row, col = divmod(i, 3)
         x = (col - 1) * 0.022
-        y = -0.155 + row * 0.022
+        y = -0.115 + row * 0.022
         keys.append(
             f'<body name="key_{label}" pos="{fmt((x, y, 0.0495))}">'
             f'<joint name="KEY_{label}" type="slide" axis="0 0 1" range="-0.006 0" stiffness="100" '
             f'springref="0.004" damping="0.05" armature="0.001"/>'
             f'<geom name="C_key_{label}" type="box" size="0.009 0.009 0.004" mass="0.005" '
             f'rgba="0.9 0.9 0.85 1" contype="1" conaffinity="1" condim="3"/></body>')
-    base = ('<body name="keypad" pos="0 0 0"><geom name="C_keypad" type="box" pos="0 -0.122 0.019" '
+    base = ('<body name="keypad" pos="0 0 0"><geom name="C_keypad" type="box" pos="0 -0.082 0.019" '
             'size="0.042 0.052 0.019" rgba="0.2 0.2 0.22 1" contype="1" conaffinity="1"/>'
             + "".join(keys) + "</body>")
     return base, labels
@@ -593,6 +593,7 @@ class Mjcf:
             '  <compiler angle="radian" autolimits="true"/>',
             '  <option timestep="0.002" iterations="20" cone="pyramidal" impratio="1"/>',
             '  <size nuser_actuator="2"/>',
+            '  <statistic center="0 -0.25 0.15" extent="0.35"/>',
             '  <visual><headlight ambient="0.4 0.4 0.4" diffuse="0.6 0.6 0.6"/><quality shadowsize="2048"/></visual>',
             "  <default>",
             '    <geom friction="1 0.005 0.001" margin="0.0005" solref="0.01 1"/>',

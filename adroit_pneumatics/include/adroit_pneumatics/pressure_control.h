@@ -1,0 +1,139 @@
+// Pressure controllers for one cylinder: iLQG MPC on the parametric model (thesis 5.5)
+// and the PIDF baseline, behind one interface so a pool can run either.
+// Units: the interface is SI (Pa, V, s); the optimiser works in MPa (thesis 5.6.1).
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "adroit_pneumatics/parametric_model.h"
+
+namespace adroit::pneumatics {
+
+// Scalar discrete dynamics p' = f(p, u) for the iLQG core, with df/dp and df/du.
+class ScalarDynamics {
+ public:
+  virtual ~ScalarDynamics() = default;
+  virtual double step(double p, double u, double* dp, double* du) const = 0;
+};
+
+struct IlqgParams {
+  int horizon = 100;            // N
+  double dt = 0.005;            // s
+  double alpha_p = 1.0;         // cost weights of eq. 5.12 (squared), pressure in MPa
+  double alpha_u = 1e-4;
+  double alpha_w = 1e-4;
+  double u_min = -2.0;          // V, about 40 % of the valve range (5.6.3 item 4)
+  double u_max = 2.0;
+  int iterations = 2;           // per solve (MPC: a few iterations per control period)
+  double feedback_fraction = 0.2;  // partial feedback (5.6.3 item 5)
+  void validate() const;        // throws std::invalid_argument naming the field
+};
+
+// Time-varying affine policy u = u_i + fraction * K_i . ([p, w] - [p_i, w_i]).
+struct Policy {
+  bool valid = false;
+  double t0 = 0, dt = 0;
+  std::vector<double> p, w, u, kp, kw;  // p in MPa
+};
+
+// Box-constrained iLQG on x = [p, w], u (valve memory w = previous command, eq. 5.11).
+// Works on any ScalarDynamics; p and references in the dynamics' units.
+class IlqgSolver {
+ public:
+  explicit IlqgSolver(const IlqgParams& params);
+  const IlqgParams& params() const { return params_; }
+
+  // p_ref, u_des: horizon + 1 samples. u_init: horizon samples (warm start) or empty.
+  // Returns false (and leaves the last solution untouched) if the result is not finite.
+  bool solve(const ScalarDynamics& f, double p0, double w0, const double* p_ref, const double* u_des,
+             const std::vector<double>& u_init, int iterations);
+
+  const std::vector<double>& u() const { return u_; }
+  const std::vector<double>& p() const { return p_; }
+  const std::vector<double>& w() const { return w_; }
+  const std::vector<double>& gainP() const { return kp_; }
+  const std::vector<double>& gainW() const { return kw_; }
+  double cost() const { return cost_; }
+
+ private:
+  double rollout(const ScalarDynamics& f, double p0, double w0, const double* p_ref, const double* u_des,
+                 const std::vector<double>& u_ff, double step, std::vector<double>& p, std::vector<double>& w,
+                 std::vector<double>& u) const;
+  bool backward(const double* p_ref, const double* u_des, double reg, double* expected);
+
+  IlqgParams params_;
+  std::vector<double> p_, w_, u_, a_, b_, kff_, kp_, kw_;
+  std::vector<double> p_try_, w_try_, u_try_;
+  double cost_ = 0;
+};
+
+struct ControlStats {
+  double solve_seconds = 0;
+  bool solved = false;
+  bool rejected = false;  // a solver result was not finite and was dropped
+};
+
+class PressureController {
+ public:
+  virtual ~PressureController() = default;
+  // One control tick at time t: p_meas (Pa), w_last (V, command currently applied),
+  // p_ref: n_ref pressure samples (Pa) at t + k * dt_ref. Returns a finite command in
+  // the controller's limits, or NaN if it has nothing safe to command.
+  virtual double update(double t, double p_meas, double w_last, const ParametricInputs& in, const double* p_ref,
+                        int n_ref, double dt_ref, ControlStats* stats) = 0;
+  virtual void reset() = 0;
+};
+
+// iLQG MPC: re-solves every `solve_every` ticks (warm start by time shift) and evaluates
+// the resulting policy at every tick.
+class IlqgPressureController : public PressureController {
+ public:
+  IlqgPressureController(const ParametricModel& model, const IlqgParams& params, int solve_every = 1);
+  double update(double t, double p_meas, double w_last, const ParametricInputs& in, const double* p_ref, int n_ref,
+                double dt_ref, ControlStats* stats) override;
+  void reset() override;
+  const Policy& policy() const { return policy_; }
+  // Policy evaluated at time t and state; NaN if no valid policy covers t.
+  double evaluate(double t, double p_meas, double w_last) const;
+
+ private:
+  ParametricModel model_;
+  IlqgSolver solver_;
+  int solve_every_;
+  int tick_ = 0;
+  Policy policy_;
+  std::vector<double> p_ref_mpa_, u_des_, warm_;
+};
+
+struct PidfParams {
+  double kp = 3.0;           // V/MPa
+  double ki = 30.0;          // V/(MPa s)
+  double kd = 0.02;          // V s/MPa
+  double filter_hz = 30.0;   // derivative low-pass
+  bool feedforward = true;   // add the model's steady-state command for the reference
+  double u_min = -2.0, u_max = 2.0;
+  void validate() const;
+};
+
+// PID with filtered derivative, anti-windup by conditional integration and optional
+// model feedforward. Uses only the current reference sample (it is myopic by design).
+class PidfController : public PressureController {
+ public:
+  PidfController(const ParametricModel& model, const PidfParams& params);
+  double update(double t, double p_meas, double w_last, const ParametricInputs& in, const double* p_ref, int n_ref,
+                double dt_ref, ControlStats* stats) override;
+  void reset() override;
+
+ private:
+  ParametricModel model_;
+  PidfParams params_;
+  bool started_ = false;
+  double last_t_ = 0, integral_ = 0, last_error_ = 0, derivative_ = 0;
+};
+
+// Resamples a reference given at dt_in onto `n` samples at dt_out (linear interpolation,
+// last value held past the end).
+void resampleReference(const double* in, int n_in, double dt_in, double offset, double dt_out, int n, double* out);
+
+}  // namespace adroit::pneumatics

@@ -1,0 +1,65 @@
+// System identification of the parametric pressure model (thesis 5.4.2) and its
+// open-loop prediction accuracy (section 4.7: 2 s windows, RMSE as % of the working range).
+// ROS-free: recordings come from CSV (here) or a rosbag (the CLI tool).
+#pragma once
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Dense>
+
+#include "adroit_pneumatics/parametric_model.h"
+
+namespace adroit::pneumatics {
+
+// One cylinder sampled at a fixed period. volts[k] is the command applied over
+// [t_k, t_k + dt); pressure[k] the measured pressure at t_k.
+struct Recording {
+  double dt = 0.005;
+  std::vector<double> volts, pressure, volume, volume_rate, supply;
+  double room = constants::kAtmosphere;
+  std::size_t size() const { return pressure.size(); }
+  ParametricInputs inputs(std::size_t k) const;
+  // Throws std::invalid_argument naming the column with a wrong length or a non-finite value.
+  void validate() const;
+};
+
+// CSV with header: t,volts,pressure,volume,volume_rate,supply (SI). Throws
+// std::runtime_error with the line number on malformed input.
+Recording readRecordingCsv(const std::string& path);
+void writeRecordingCsv(const std::string& path, const Recording& rec);
+
+struct LmResult {
+  Eigen::VectorXd x;
+  double cost = 0;  // 0.5 |r|^2 at x
+  int iterations = 0;
+};
+
+// Levenberg-Marquardt with a forward-difference Jacobian (relative step). residual(x, r)
+// fills r (its size fixed by the first call).
+LmResult levenbergMarquardt(const std::function<void(const Eigen::VectorXd&, Eigen::VectorXd&)>& residual,
+                            Eigen::VectorXd x0, int max_iterations = 60);
+
+struct FitReport {
+  ParametricParams params;
+  double steady_rmse = 0;       // Pa, sweep fit
+  double segment_rmse = 0;      // Pa, multi-step fit
+};
+
+// (a) Steady state from a slow sweep: c2, c3, c4. (b) Rate from low-passed random commands:
+// c7, c8, c9, cg (+ c5, c6 if fit_volume), by multi-step simulation error over segments of
+// `segment` samples, then all parameters jointly.
+FitReport fitParametricModel(const Recording& sweep, const Recording& random, bool fit_volume,
+                             int segment = 20, const ParametricParams& initial = {});
+
+struct PredictionReport {
+  double rmse = 0;          // Pa over all windows
+  double percent = 0;       // of the working range (mean supply - room)
+  int windows = 0;
+};
+
+// Open-loop prediction from the measured pressure at each window start.
+PredictionReport predictionRmse(const Recording& rec, const ParametricModel& model, double window = 2.0);
+
+}  // namespace adroit::pneumatics

@@ -1,0 +1,261 @@
+#include "adroit_pneumatics/plant.h"
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <stdexcept>
+
+namespace adroit::pneumatics {
+
+using namespace constants;
+
+namespace {
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kMinPressure = 1e3;  // Pa; keeps the flow function's ratios finite
+
+CylinderSpec makeSpec(const std::string& type, double bore, double stroke, double dead_volume,
+                      double leak_diameter, int valve) {
+  CylinderSpec s;
+  s.type = type;
+  s.bore_diameter = bore;
+  s.bore_area = kPi * bore * bore / 4.0;
+  s.stroke = stroke;
+  s.dead_volume = dead_volume;
+  s.leak_area = kPi * leak_diameter * leak_diameter / 4.0;
+  s.valve = valveParams(valve);
+  return s;
+}
+
+// (exp(z) - 1) / z, finite at z = 0. The cancellation for |z| >= 1e-5 costs at most
+// ~1e-11 relative.
+inline double phi1(double z) {
+  return std::abs(z) < 1e-5 ? 1.0 + z * (0.5 + z / 6.0) : (fastExp(z) - 1.0) / z;
+}
+
+// Right-hand side of eq. 5.3 with the tabulated flow; with_jacobian also gives d/dp.
+// Written out for the usual orientation (room <= p <= supply) so only the flow-reversal
+// cases take the general path.
+template <bool with_jacobian>
+inline double rhs(double p, const ChamberInputs& in, double gain, double volume_term, double* jac,
+                  double* inflow) {
+  const FlowTable& table = flowTable();
+  double phi_in, din_p, phi_out, dout_p, dummy;
+  if (p <= in.supply) {
+    phi_in = in.supply * table.g(p / in.supply, &din_p);
+  } else {
+    phi_in = table.phi(in.supply, p, &dummy, &din_p);
+  }
+  if (p >= in.room) {
+    const double r = in.room / p;
+    double dg;
+    const double gv = table.g(r, &dg);
+    phi_out = p * gv;
+    dout_p = gv - r * dg;
+  } else {
+    phi_out = table.phi(p, in.room, &dout_p, &dummy);
+  }
+  if (with_jacobian) *jac = gain * (in.inlet_area * din_p - in.outlet_area * dout_p) - volume_term;
+  *inflow = in.inlet_area * phi_in;
+  return gain * (*inflow - in.outlet_area * phi_out) - volume_term * p;
+}
+}  // namespace
+
+CylinderSpec cylinderSpec(const std::string& type) {
+  // Leak orifice of the AIRPEL air seal: 1.9665e-4 m for the 9 mm bore (section 4.5); the
+  // seal gap is similar across bores, so the equivalent diameter scales with the bore.
+  constexpr double kLeakM9 = 1.9665e-4;
+  // Dead volume at full retraction: about 0.1 cm^3 for the M9 (section 4.3.3); larger
+  // cylinders scale with bore area (end cap and port).
+  if (type == "M9") return makeSpec(type, 0.009, 0.0375, 1.0e-7, kLeakM9, 1);
+  if (type == "M16") return makeSpec(type, 0.016, 0.050, 1.0e-7 * (16.0 / 9.0) * (16.0 / 9.0),
+                                     kLeakM9 * 16.0 / 9.0, 2);
+  if (type == "M24") return makeSpec(type, 0.024, 0.075, 1.0e-7 * (24.0 / 9.0) * (24.0 / 9.0),
+                                     kLeakM9 * 24.0 / 9.0, 2);
+  throw std::invalid_argument("cylinderSpec: unknown cylinder type '" + type +
+                              "' (known: M9, M16, M24)");
+}
+
+double chamberPressureRate(double p, const ChamberInputs& in) {
+  const double mdot = in.inlet_area * flowPhi(in.supply, p) - in.outlet_area * flowPhi(p, in.room);
+  return kKappa / in.volume * (kRsT * mdot - p * in.volume_rate);
+}
+
+double chamberStep(double p0, double dt, const ChamberInputs& in, double* inlet_mass_flow) {
+  const double inv_volume = 1.0 / in.volume;
+  const double gain = kKappa * kRsT * inv_volume;
+  const double volume_term = kKappa * in.volume_rate * inv_volume;
+  double j0, j1, q0, q1;
+  const double f0 = rhs<true>(p0, in, gain, volume_term, &j0, &q0);
+  if (inlet_mass_flow) *inlet_mass_flow = q0;
+  if (f0 == 0.0) return p0;
+  // Predictor: exact solution of the linearisation at p0. Bounded so the secant below is
+  // taken over a physically meaningful interval.
+  const double lo = 0.5 * std::min(p0, in.room);
+  const double hi = 2.0 * std::max(p0, in.supply);
+  const double p1 = std::clamp(p0 + dt * phi1(j0 * dt) * f0, std::max(lo, kMinPressure), hi);
+  const double f1 = rhs<false>(p1, in, gain, volume_term, &j1, &q1);
+  // Corrector: same exponential step with the secant slope over [p0, p1].
+  const double js = (p1 != p0) ? (f1 - f0) / (p1 - p0) : j0;
+  const double p2 = std::max(p0 + dt * phi1(js * dt) * f0, kMinPressure);
+  if (std::min(j0, js) * dt > -1.0) return p2;
+  // Stiff (small volume, or the square-root edge of the flow near equilibrium). With
+  // constant inputs the scalar solution is monotone and cannot cross an equilibrium; if a
+  // stage crossed one, find that root of f (Illinois regula falsi on the bracket) and take
+  // the exponential approach to it with the secant rate from p0. Exact for linear f, never
+  // overshoots, and lands on the quasi-static equilibrium in the stiff limit.
+  double pa = p0, fa = f0, pb = p1, fb = f1;
+  if ((f1 > 0) == (f0 > 0)) {
+    pa = p1, fa = f1;
+    pb = p2;
+    fb = rhs<false>(pb, in, gain, volume_term, &j1, &q1);
+    if ((fb > 0) == (f0 > 0)) return p2;  // no crossing: the corrector is monotone
+  }
+  double root = pb;
+  int side = 0;
+  for (int it = 0; it < 40; ++it) {
+    root = (pa * fb - pb * fa) / (fb - fa);
+    const double fr = rhs<false>(root, in, gain, volume_term, &j1, &q1);
+    if (std::abs(pb - pa) < 1.0 || fr == 0.0) break;
+    if ((fr > 0) == (fb > 0)) {
+      pb = root, fb = fr;
+      if (side == -1) fa *= 0.5;
+      side = -1;
+    } else {
+      pa = root, fa = fr;
+      if (side == 1) fb *= 0.5;
+      side = 1;
+    }
+    if (std::abs(fr) * dt < 0.5) break;  // the residual moves p by < 0.5 Pa over dt
+  }
+  if (root == p0) return p0;
+  const double rate = f0 / (p0 - root);  // < 0: secant slope from p0 to the equilibrium
+  return std::max(root + (p0 - root) * fastExp(rate * dt), kMinPressure);
+}
+
+PneumaticPlant::PneumaticPlant(std::vector<CylinderSpec> specs, const SupplyParams& supply,
+                               std::uint64_t seed, const PlantOptions& options)
+    : specs_(std::move(specs)), supply_params_(supply), options_(options) {
+  if (specs_.empty()) throw std::invalid_argument("PneumaticPlant: no cylinders");
+  if (!(supply.nominal_pressure > supply.atmospheric_pressure) || !(supply.atmospheric_pressure > 0))
+    throw std::invalid_argument("PneumaticPlant: supply.nominal_pressure must exceed atmospheric_pressure > 0");
+  if (!(supply.time_constant > 0)) throw std::invalid_argument("PneumaticPlant: supply.time_constant must be > 0");
+  if (!(options.tube_delay >= 0)) throw std::invalid_argument("PneumaticPlant: tube_delay must be >= 0");
+  for (const auto& s : specs_) {
+    if (!(s.bore_area > 0) || !(s.stroke > 0) || !(s.dead_volume > 0) || !(s.leak_area >= 0))
+      throw std::invalid_argument("PneumaticPlant: cylinder '" + s.type +
+                                  "' needs bore_area > 0, stroke > 0, dead_volume > 0, leak_area >= 0");
+  }
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> unit(0.0, 1.0);
+  for (auto& s : specs_) {
+    const double scale_in = std::exp(options.area_spread * unit(rng));
+    const double scale_out = std::exp(options.area_spread * unit(rng));
+    const double shift = options.offset_spread * unit(rng);  // spool zero offset
+    s.valve.inlet.a *= scale_in;
+    s.valve.inlet.offset *= scale_in;
+    s.valve.exhaust.a *= scale_out;
+    s.valve.exhaust.offset *= scale_out;
+    s.valve.inlet.d += shift;
+    s.valve.exhaust.d += shift;
+  }
+  const std::size_t n = specs_.size();
+  supply_pressure_ = supply.nominal_pressure;
+  pressure_.assign(n, options.initial_pressure);
+  history_time_.assign(1, -1e30);  // the initial command has always been there
+  history_volts_.assign(n, std::clamp(options.initial_volts, -5.0, 5.0));
+  applied_volts_.assign(n, std::nan(""));
+  inlet_area_.assign(n, 0.0);
+  outlet_area_.assign(n, 0.0);
+  last_volts_ = history_volts_;
+}
+
+void PneumaticPlant::updateAreas(std::size_t i, double volts) {
+  if (volts == applied_volts_[i]) return;  // areas depend only on the command
+  applied_volts_[i] = volts;
+  inlet_area_[i] = specs_[i].valve.inlet(volts);
+  outlet_area_[i] = specs_[i].valve.exhaust(volts) + specs_[i].leak_area;
+}
+
+double PneumaticPlant::tension(std::size_t i) const {
+  return std::max(0.0, (pressure_[i] - supply_params_.atmospheric_pressure) * specs_[i].bore_area);
+}
+
+void PneumaticPlant::step(double dt, const double* volts, const double* travel, const double* travel_rate) {
+  if (!(dt > 0) || !std::isfinite(dt)) return;
+  const std::size_t n = specs_.size();
+  // Push this step's command into the delay line.
+  if (volts) {
+    for (std::size_t i = 0; i < n; ++i)
+      last_volts_[i] = std::isfinite(volts[i]) ? std::clamp(volts[i], -5.0, 5.0) : 0.0;
+  }
+  history_time_.push_back(time_);
+  history_volts_.insert(history_volts_.end(), last_volts_.begin(), last_volts_.end());
+  // The command acting now is the newest frame at least tube_delay old; drop older ones.
+  const double cutoff = time_ - options_.tube_delay + 1e-9;
+  std::size_t acting = 0;
+  while (acting + 1 < history_time_.size() && history_time_[acting + 1] <= cutoff) ++acting;
+  if (acting > 0) {
+    history_time_.erase(history_time_.begin(), history_time_.begin() + acting);
+    history_volts_.erase(history_volts_.begin(), history_volts_.begin() + acting * n);
+  }
+  const double* acting_volts = history_volts_.data();
+
+  const double room = supply_params_.atmospheric_pressure;
+  double total_inflow = 0.0;
+  ChamberInputs in;
+  in.supply = supply_pressure_;
+  in.room = room;
+  for (std::size_t i = 0; i < n; ++i) {
+    const CylinderSpec& s = specs_[i];
+    updateAreas(i, acting_volts[i]);
+    double x = travel ? travel[i] : 0.0;
+    double xdot = travel_rate ? travel_rate[i] : 0.0;
+    if (!std::isfinite(x)) x = 0.0;
+    if (!std::isfinite(xdot)) xdot = 0.0;
+    // At an end stop the piston cannot move further out of range.
+    if (x <= 0.0) { x = 0.0; xdot = std::max(0.0, xdot); }
+    if (x >= s.stroke) { x = s.stroke; xdot = std::min(0.0, xdot); }
+    in.inlet_area = inlet_area_[i];
+    in.outlet_area = outlet_area_[i];
+    in.volume = s.dead_volume + s.bore_area * x;
+    in.volume_rate = s.bore_area * xdot;
+    double inflow;
+    pressure_[i] = chamberStep(pressure_[i], dt, in, &inflow);
+    total_inflow += std::max(0.0, inflow);
+  }
+  // Supply: first-order lag towards its flow-dependent set point (exact over dt).
+  const double target = supply_enabled_
+                            ? supply_params_.nominal_pressure - supply_params_.sag_per_mass_flow * total_inflow
+                            : room;
+  const double blend = -std::expm1(-dt / supply_params_.time_constant);
+  supply_pressure_ = std::max(room, supply_pressure_ + (target - supply_pressure_) * blend);
+  time_ += dt;
+}
+
+PlantState PneumaticPlant::state() const {
+  PlantState s;
+  s.time = time_;
+  s.supply_pressure = supply_pressure_;
+  s.supply_enabled = supply_enabled_;
+  s.pressure = pressure_;
+  s.history_time = history_time_;
+  s.history_volts = history_volts_;
+  // The command to repeat when step() gets no volts is the newest frame.
+  return s;
+}
+
+void PneumaticPlant::setState(const PlantState& s) {
+  const std::size_t n = specs_.size();
+  if (s.pressure.size() != n || s.history_time.empty() || s.history_volts.size() != s.history_time.size() * n)
+    throw std::invalid_argument("PneumaticPlant::setState: state does not match a plant of " +
+                                std::to_string(n) + " cylinders");
+  time_ = s.time;
+  supply_pressure_ = s.supply_pressure;
+  supply_enabled_ = s.supply_enabled;
+  pressure_ = s.pressure;
+  history_time_ = s.history_time;
+  history_volts_ = s.history_volts;
+  last_volts_.assign(history_volts_.end() - n, history_volts_.end());
+}
+
+}  // namespace adroit::pneumatics

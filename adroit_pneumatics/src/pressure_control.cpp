@@ -1,0 +1,301 @@
+#include "adroit_pneumatics/pressure_control.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+namespace adroit::pneumatics {
+
+namespace {
+constexpr double kMPa = 1e-6;
+const double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+bool allFinite(const std::vector<double>& v) {
+  return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x); });
+}
+
+// Parametric model in MPa with inputs frozen over the horizon (v, vdot are sensor inputs, 5.5.5).
+class ParametricDynamics : public ScalarDynamics {
+ public:
+  ParametricDynamics(const ParametricModel& m, const ParametricInputs& in, double dt) : m_(m), in_(in), dt_(dt) {}
+  double step(double p, double u, double* dp, double* du) const override {
+    const double next = m_.step(p / kMPa, u, dt_, in_, dp, du);
+    if (du) *du *= kMPa;
+    return next * kMPa;
+  }
+
+ private:
+  const ParametricModel& m_;
+  ParametricInputs in_;
+  double dt_;
+};
+}  // namespace
+
+void IlqgParams::validate() const {
+  if (horizon < 1 || horizon > 10000) throw std::invalid_argument("ilqg: horizon must be in [1, 10000]");
+  if (!(dt > 0) || !std::isfinite(dt)) throw std::invalid_argument("ilqg: dt must be > 0");
+  if (!(alpha_p > 0) || !std::isfinite(alpha_p)) throw std::invalid_argument("ilqg: alpha_p must be > 0");
+  if (!(alpha_u >= 0) || !std::isfinite(alpha_u)) throw std::invalid_argument("ilqg: alpha_u must be >= 0");
+  if (!(alpha_w >= 0) || !std::isfinite(alpha_w)) throw std::invalid_argument("ilqg: alpha_w must be >= 0");
+  if (!(u_min < u_max) || u_min < -5 || u_max > 5) throw std::invalid_argument("ilqg: need -5 <= u_min < u_max <= 5");
+  if (iterations < 1) throw std::invalid_argument("ilqg: iterations must be >= 1");
+  if (!(feedback_fraction >= 0 && feedback_fraction <= 1))
+    throw std::invalid_argument("ilqg: feedback_fraction must be in [0, 1]");
+}
+
+IlqgSolver::IlqgSolver(const IlqgParams& params) : params_(params) {
+  params_.validate();
+  const auto n = static_cast<std::size_t>(params_.horizon);
+  p_.assign(n + 1, 0.0);
+  w_.assign(n + 1, 0.0);
+  u_.assign(n, 0.0);
+  a_.assign(n, 0.0);
+  b_.assign(n, 0.0);
+  kff_.assign(n, 0.0);
+  kp_.assign(n, 0.0);
+  kw_.assign(n, 0.0);
+  p_try_ = p_;
+  w_try_ = w_;
+  u_try_ = u_;
+}
+
+double IlqgSolver::rollout(const ScalarDynamics& f, double p0, double w0, const double* p_ref, const double* u_des,
+                           const std::vector<double>& u_ff, double step, std::vector<double>& p,
+                           std::vector<double>& w, std::vector<double>& u) const {
+  // With step < 0 the controls are u_ff as given (initial rollout); otherwise the
+  // iLQG update u_i + step k_i + K_i (x_i - x_i_nominal).
+  const int n = params_.horizon;
+  const double ap = params_.alpha_p, au = params_.alpha_u, aw = params_.alpha_w;
+  p[0] = p0;
+  w[0] = w0;
+  double cost = 0;
+  for (int i = 0; i < n; ++i) {
+    double ui = u_ff[i];
+    if (step >= 0) ui += step * kff_[i] + kp_[i] * (p[i] - p_[i]) + kw_[i] * (w[i] - w_[i]);
+    ui = std::clamp(ui, params_.u_min, params_.u_max);
+    u[i] = ui;
+    const double ep = p_ref[i] - p[i], eu = u_des[i] - ui, ew = ui - w[i];
+    cost += ap * ep * ep + au * eu * eu + aw * ew * ew;
+    p[i + 1] = f.step(p[i], ui, nullptr, nullptr);
+    w[i + 1] = ui;
+  }
+  const double ep = p_ref[n] - p[n];
+  return cost + ap * ep * ep;
+}
+
+bool IlqgSolver::backward(const double* p_ref, const double* u_des, double reg, double* expected) {
+  const int n = params_.horizon;
+  const double ap = params_.alpha_p, au = params_.alpha_u, aw = params_.alpha_w;
+  // Value function V(p, w) ~ V1 dp + V2 dw + 1/2 [dp dw] [[V11 V12][V12 V22]] [dp dw]^T.
+  double V1 = -2.0 * ap * (p_ref[n] - p_[n]), V2 = 0, V11 = 2.0 * ap, V12 = 0, V22 = 0;
+  double dv = 0;
+  for (int i = n - 1; i >= 0; --i) {
+    const double a = a_[i], b = b_[i], u = u_[i];
+    // Cost derivatives (l = ap (pr - p)^2 + au (ud - u)^2 + aw (u - w)^2).
+    const double lp = -2.0 * ap * (p_ref[i] - p_[i]);
+    const double lw = -2.0 * aw * (u - w_[i]);
+    const double lu = -2.0 * au * (u_des[i] - u) + 2.0 * aw * (u - w_[i]);
+    // Next state [a p + b u, u]: fx = [[a, 0], [0, 0]], fu = [b, 1].
+    const double Qp = lp + a * V1;
+    const double Qw = lw;
+    const double Qu = lu + b * V1 + V2;
+    const double Qpp = 2.0 * ap + a * a * V11;
+    const double Qww = 2.0 * aw;
+    const double Quu = 2.0 * au + 2.0 * aw + b * b * V11 + 2.0 * b * V12 + V22;
+    const double Qup = a * (b * V11 + V12);
+    const double Quw = -2.0 * aw;
+    const double H = Quu + reg;
+    if (!(H > 0)) return false;
+    double k = -Qu / H, Kp = -Qup / H, Kw = -Quw / H;
+    // Box constraint on u (scalar case of the projected Newton step): at an active
+    // bound the feedback is dropped.
+    if (u + k > params_.u_max) { k = params_.u_max - u; Kp = Kw = 0; }
+    else if (u + k < params_.u_min) { k = params_.u_min - u; Kp = Kw = 0; }
+    kff_[i] = k;
+    kp_[i] = Kp;
+    kw_[i] = Kw;
+    dv += k * Qu + 0.5 * k * k * Quu;
+    // V = Q with u = k + K dx substituted (Qpw = 0 here).
+    V1 = Qp + Kp * Quu * k + Kp * Qu + Qup * k;
+    V2 = Qw + Kw * Quu * k + Kw * Qu + Quw * k;
+    V11 = Qpp + Kp * Quu * Kp + 2.0 * Kp * Qup;
+    V12 = Kp * Quu * Kw + Kp * Quw + Qup * Kw;
+    V22 = Qww + Kw * Quu * Kw + 2.0 * Kw * Quw;
+  }
+  *expected = dv;
+  return std::isfinite(dv);
+}
+
+bool IlqgSolver::solve(const ScalarDynamics& f, double p0, double w0, const double* p_ref, const double* u_des,
+                       const std::vector<double>& u_init, int iterations) {
+  const int n = params_.horizon;
+  std::vector<double> u0(n);
+  for (int i = 0; i < n; ++i) u0[i] = i < static_cast<int>(u_init.size()) ? u_init[i] : u_des[i];
+  std::vector<double> p(n + 1), w(n + 1), u(n);
+  double cost = rollout(f, p0, w0, p_ref, u_des, u0, -1.0, p, w, u);
+  if (!std::isfinite(cost)) return false;
+  p_.swap(p);
+  w_.swap(w);
+  u_.swap(u);
+  double reg = 0.0;
+  for (int it = 0; it < iterations; ++it) {
+    for (int i = 0; i < n; ++i) f.step(p_[i], u_[i], &a_[i], &b_[i]);
+    double expected = 0;
+    if (!backward(p_ref, u_des, reg, &expected)) {
+      reg = std::max(1e-6, reg * 10.0);
+      continue;
+    }
+    if (expected > -1e-14) break;  // converged: no descent left
+    bool accepted = false;
+    for (double step : {1.0, 0.5, 0.25, 0.1}) {
+      const double c = rollout(f, p0, w0, p_ref, u_des, u_, step, p_try_, w_try_, u_try_);
+      if (std::isfinite(c) && c < cost) {
+        cost = c;
+        p_.swap(p_try_);
+        w_.swap(w_try_);
+        u_.swap(u_try_);
+        accepted = true;
+        break;
+      }
+    }
+    if (!accepted) reg = std::max(1e-6, reg * 10.0);
+    else reg *= 0.1;
+  }
+  // Gains of the final trajectory for the policy.
+  for (int i = 0; i < n; ++i) f.step(p_[i], u_[i], &a_[i], &b_[i]);
+  double expected;
+  if (!backward(p_ref, u_des, reg, &expected) && !backward(p_ref, u_des, std::max(reg, 1e-6), &expected)) return false;
+  cost_ = cost;
+  return allFinite(u_) && allFinite(p_) && allFinite(kp_) && allFinite(kw_);
+}
+
+IlqgPressureController::IlqgPressureController(const ParametricModel& model, const IlqgParams& params,
+                                               int solve_every)
+    : model_(model), solver_(params), solve_every_(std::max(1, solve_every)) {}
+
+void IlqgPressureController::reset() {
+  tick_ = 0;
+  policy_ = Policy{};
+  warm_.clear();
+}
+
+double IlqgPressureController::evaluate(double t, double p_meas, double w_last) const {
+  if (!policy_.valid) return kNaN;
+  const auto n = static_cast<int>(policy_.u.size());
+  const int i = static_cast<int>(std::floor((t - policy_.t0) / policy_.dt + 1e-6));
+  if (i < 0 || i >= n) return kNaN;
+  const IlqgParams& prm = solver_.params();
+  const double dx_p = p_meas * kMPa - policy_.p[i], dx_w = w_last - policy_.w[i];
+  const double u = policy_.u[i] + prm.feedback_fraction * (policy_.kp[i] * dx_p + policy_.kw[i] * dx_w);
+  return std::isfinite(u) ? std::clamp(u, prm.u_min, prm.u_max) : kNaN;
+}
+
+double IlqgPressureController::update(double t, double p_meas, double w_last, const ParametricInputs& in,
+                                      const double* p_ref, int n_ref, double dt_ref, ControlStats* stats) {
+  const IlqgParams& prm = solver_.params();
+  const int n = prm.horizon;
+  if (stats) *stats = ControlStats{};
+  const bool due = (tick_++ % solve_every_) == 0 || !policy_.valid;
+  if (due && n_ref > 0 && std::isfinite(p_meas) && std::isfinite(w_last)) {
+    const auto start = std::chrono::steady_clock::now();
+    p_ref_mpa_.resize(n + 1);
+    u_des_.resize(n + 1);
+    resampleReference(p_ref, n_ref, dt_ref, 0.0, prm.dt, n + 1, p_ref_mpa_.data());
+    // Desired command = model steady-state inverse of the reference. It is smooth in
+    // time, so solve it every 10th sample and interpolate (it dominated the solve time).
+    constexpr int kEvery = 10;
+    for (int i = 0; i <= n; i += kEvery)
+      u_des_[i] = model_.inverseSteadyState(p_ref_mpa_[i], in, prm.u_min, prm.u_max);
+    const int last = (n / kEvery) * kEvery;
+    if (last != n) u_des_[n] = model_.inverseSteadyState(p_ref_mpa_[n], in, prm.u_min, prm.u_max);
+    for (int i = 0; i <= n; ++i) {
+      if (i % kEvery != 0 && i != n) {
+        const int a = (i / kEvery) * kEvery, b = std::min(a + kEvery, n);
+        u_des_[i] = u_des_[a] + (u_des_[b] - u_des_[a]) * (i - a) / static_cast<double>(b - a);
+      }
+      p_ref_mpa_[i] *= kMPa;
+    }
+    // Warm start: previous controls shifted by the time elapsed since that solve.
+    warm_.clear();
+    if (policy_.valid) {
+      const int shift = static_cast<int>(std::lround((t - policy_.t0) / prm.dt));
+      for (int i = 0; i < n; ++i) {
+        const int j = std::min(std::max(i + shift, 0), n - 1);
+        warm_.push_back(policy_.u[j]);
+      }
+    }
+    const ParametricDynamics dyn(model_, in, prm.dt);
+    const bool ok = solver_.solve(dyn, p_meas * kMPa, w_last, p_ref_mpa_.data(), u_des_.data(), warm_, prm.iterations);
+    if (ok) {
+      policy_.valid = true;
+      policy_.t0 = t;
+      policy_.dt = prm.dt;
+      policy_.p = solver_.p();
+      policy_.w = solver_.w();
+      policy_.u = solver_.u();
+      policy_.kp = solver_.gainP();
+      policy_.kw = solver_.gainW();
+    }
+    if (stats) {
+      stats->solved = ok;
+      stats->rejected = !ok;
+      stats->solve_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    }
+  }
+  return evaluate(t, p_meas, w_last);
+}
+
+void PidfParams::validate() const {
+  if (!(kp >= 0) || !(ki >= 0) || !(kd >= 0) || !std::isfinite(kp + ki + kd))
+    throw std::invalid_argument("pidf: gains kp, ki, kd must be finite and >= 0");
+  if (!(filter_hz > 0)) throw std::invalid_argument("pidf: filter_hz must be > 0");
+  if (!(u_min < u_max) || u_min < -5 || u_max > 5) throw std::invalid_argument("pidf: need -5 <= u_min < u_max <= 5");
+}
+
+PidfController::PidfController(const ParametricModel& model, const PidfParams& params)
+    : model_(model), params_(params) {
+  params_.validate();
+}
+
+void PidfController::reset() {
+  started_ = false;
+  integral_ = last_error_ = derivative_ = 0;
+}
+
+double PidfController::update(double t, double p_meas, double /*w_last*/, const ParametricInputs& in,
+                              const double* p_ref, int n_ref, double /*dt_ref*/, ControlStats* stats) {
+  if (stats) *stats = ControlStats{};
+  if (n_ref < 1 || !std::isfinite(p_meas) || !std::isfinite(p_ref[0])) return kNaN;
+  const double e = (p_ref[0] - p_meas) * kMPa;
+  const double dt = started_ ? t - last_t_ : 0.0;
+  if (started_ && dt > 0) {
+    const double raw = (e - last_error_) / dt;
+    const double blend = -std::expm1(-dt * 2.0 * M_PI * params_.filter_hz);
+    derivative_ += blend * (raw - derivative_);
+  }
+  const double ff = params_.feedforward ? model_.inverseSteadyState(p_ref[0], in, params_.u_min, params_.u_max) : 0.0;
+  const double unclamped = ff + params_.kp * e + params_.ki * integral_ + params_.kd * derivative_;
+  // Integrate only while not pushing further into saturation (anti-windup).
+  const bool saturated = (unclamped > params_.u_max && e > 0) || (unclamped < params_.u_min && e < 0);
+  if (started_ && dt > 0 && !saturated) integral_ += e * dt;
+  started_ = true;
+  last_t_ = t;
+  last_error_ = e;
+  const double u = std::clamp(unclamped, params_.u_min, params_.u_max);
+  return std::isfinite(u) ? u : kNaN;
+}
+
+void resampleReference(const double* in, int n_in, double dt_in, double offset, double dt_out, int n, double* out) {
+  for (int k = 0; k < n; ++k) {
+    const double x = (offset + k * dt_out) / dt_in;
+    if (n_in == 1 || x >= n_in - 1) { out[k] = in[n_in - 1]; continue; }
+    if (x <= 0) { out[k] = in[0]; continue; }
+    const int i = static_cast<int>(x);
+    const double f = x - i;
+    out[k] = in[i] + f * (in[i + 1] - in[i]);
+  }
+}
+
+}  // namespace adroit::pneumatics

@@ -1,0 +1,238 @@
+#include "adroit_pneumatics/sysid.h"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+
+namespace adroit::pneumatics {
+
+ParametricInputs Recording::inputs(std::size_t k) const {
+  ParametricInputs in;
+  in.volume = volume[k];
+  in.volume_rate = volume_rate[k];
+  in.supply = supply[k];
+  in.room = room;
+  return in;
+}
+
+void Recording::validate() const {
+  const std::size_t n = pressure.size();
+  const std::pair<const char*, const std::vector<double>*> cols[] = {
+      {"volts", &volts}, {"pressure", &pressure}, {"volume", &volume}, {"volume_rate", &volume_rate}, {"supply", &supply}};
+  for (const auto& [name, col] : cols) {
+    if (col->size() != n) throw std::invalid_argument(std::string("recording: column '") + name + "' has the wrong length");
+    for (double v : *col)
+      if (!std::isfinite(v)) throw std::invalid_argument(std::string("recording: column '") + name + "' has a non-finite value");
+  }
+  if (!(dt > 0)) throw std::invalid_argument("recording: dt must be > 0");
+  if (n < 2) throw std::invalid_argument("recording: fewer than 2 samples");
+}
+
+Recording readRecordingCsv(const std::string& path) {
+  std::ifstream f(path);
+  if (!f) throw std::runtime_error("cannot open " + path);
+  std::string line;
+  if (!std::getline(f, line) || line.rfind("t,volts,pressure,volume,volume_rate,supply", 0) != 0)
+    throw std::runtime_error(path + ":1: expected header t,volts,pressure,volume,volume_rate,supply");
+  Recording rec;
+  std::vector<double> t;
+  int lineno = 1;
+  while (std::getline(f, line)) {
+    ++lineno;
+    if (line.empty()) continue;
+    std::stringstream ss(line);
+    double v[6];
+    for (int i = 0; i < 6; ++i) {
+      std::string cell;
+      if (!std::getline(ss, cell, ',')) throw std::runtime_error(path + ":" + std::to_string(lineno) + ": expected 6 columns");
+      try {
+        std::size_t used = 0;
+        v[i] = std::stod(cell, &used);
+      } catch (const std::exception&) {
+        throw std::runtime_error(path + ":" + std::to_string(lineno) + ": not a number: '" + cell + "'");
+      }
+    }
+    t.push_back(v[0]);
+    rec.volts.push_back(v[1]);
+    rec.pressure.push_back(v[2]);
+    rec.volume.push_back(v[3]);
+    rec.volume_rate.push_back(v[4]);
+    rec.supply.push_back(v[5]);
+  }
+  if (t.size() < 2) throw std::runtime_error(path + ": fewer than 2 samples");
+  rec.dt = (t.back() - t.front()) / (t.size() - 1);
+  rec.validate();
+  return rec;
+}
+
+void writeRecordingCsv(const std::string& path, const Recording& rec) {
+  std::ofstream f(path);
+  if (!f) throw std::runtime_error("cannot write " + path);
+  f.precision(10);
+  f << "t,volts,pressure,volume,volume_rate,supply\n";
+  for (std::size_t k = 0; k < rec.size(); ++k)
+    f << k * rec.dt << ',' << rec.volts[k] << ',' << rec.pressure[k] << ',' << rec.volume[k] << ','
+      << rec.volume_rate[k] << ',' << rec.supply[k] << '\n';
+}
+
+LmResult levenbergMarquardt(const std::function<void(const Eigen::VectorXd&, Eigen::VectorXd&)>& residual,
+                            Eigen::VectorXd x, int max_iterations) {
+  Eigen::VectorXd r, r_try;
+  residual(x, r);
+  double cost = 0.5 * r.squaredNorm();
+  double lambda = 1e-3;
+  LmResult out;
+  const Eigen::Index n = x.size();
+  Eigen::MatrixXd J(r.size(), n);
+  for (int it = 0; it < max_iterations; ++it) {
+    out.iterations = it + 1;
+    for (Eigen::Index j = 0; j < n; ++j) {
+      Eigen::VectorXd xp = x;
+      const double h = 1e-6 * std::max(1.0, std::abs(x[j]));
+      xp[j] += h;
+      residual(xp, r_try);
+      J.col(j) = (r_try - r) / h;
+    }
+    const Eigen::MatrixXd JtJ = J.transpose() * J;
+    const Eigen::VectorXd g = J.transpose() * r;
+    bool improved = false;
+    for (int attempt = 0; attempt < 12; ++attempt) {
+      Eigen::MatrixXd A = JtJ;
+      A.diagonal() += lambda * (JtJ.diagonal().array() + 1e-12).matrix();
+      const Eigen::VectorXd dx = A.ldlt().solve(-g);
+      const Eigen::VectorXd xt = x + dx;
+      residual(xt, r_try);
+      const double c = 0.5 * r_try.squaredNorm();
+      if (std::isfinite(c) && c < cost) {
+        const double rel = (cost - c) / std::max(cost, 1e-300);
+        x = xt;
+        r = r_try;
+        cost = c;
+        lambda = std::max(lambda * 0.3, 1e-9);
+        improved = true;
+        if (rel < 1e-10) it = max_iterations;  // converged
+        break;
+      }
+      lambda *= 10.0;
+    }
+    if (!improved) break;
+  }
+  out.x = x;
+  out.cost = cost;
+  return out;
+}
+
+namespace {
+
+// Parameters are only accepted inside the validity region; outside it the residual is
+// made large so LM steps back.
+bool tryModel(const ParametricParams& p, ParametricModel* m) {
+  try {
+    *m = ParametricModel(p);
+    return true;
+  } catch (const std::invalid_argument&) {
+    return false;
+  }
+}
+
+// Multi-step simulation residuals over consecutive segments (each starts from the measured
+// pressure). Residuals are in kPa to keep LM well scaled.
+void segmentResiduals(const Recording& rec, const ParametricParams& prm, int segment, Eigen::VectorXd& r) {
+  const std::size_t n = rec.size();
+  const std::size_t count = (n - 1) / segment;
+  r.resize(static_cast<Eigen::Index>(count * segment));
+  ParametricModel m;
+  if (!tryModel(prm, &m)) {
+    r.setConstant(1e6);
+    return;
+  }
+  Eigen::Index idx = 0;
+  for (std::size_t s = 0; s < count; ++s) {
+    std::size_t k = s * segment;
+    double p = rec.pressure[k];
+    for (int j = 0; j < segment; ++j, ++k) {
+      p = m.step(p, rec.volts[k], rec.dt, rec.inputs(k));
+      r[idx++] = std::isfinite(p) ? (p - rec.pressure[k + 1]) * 1e-3 : 1e6;
+    }
+  }
+}
+
+}  // namespace
+
+FitReport fitParametricModel(const Recording& sweep, const Recording& random, bool fit_volume, int segment,
+                             const ParametricParams& initial) {
+  sweep.validate();
+  random.validate();
+  if (segment < 1 || static_cast<std::size_t>(segment) >= random.size())
+    throw std::invalid_argument("fitParametricModel: segment must be in [1, samples)");
+  FitReport rep;
+  ParametricParams prm = initial;
+  // (a) Steady state: the slow sweep drags the equilibrium along, p ~ s(u).
+  {
+    auto res = [&](const Eigen::VectorXd& x, Eigen::VectorXd& r) {
+      ParametricParams q = prm;
+      q.c2 = x[0], q.c3 = x[1], q.c4 = x[2];
+      r.resize(static_cast<Eigen::Index>(sweep.size()));
+      ParametricModel m;
+      if (!tryModel(q, &m)) { r.setConstant(1e6); return; }
+      for (std::size_t k = 0; k < sweep.size(); ++k)
+        r[k] = (m.steadyState(sweep.volts[k], sweep.inputs(k)) - sweep.pressure[k]) * 1e-3;
+    };
+    Eigen::VectorXd x0(3);
+    x0 << prm.c2, prm.c3, prm.c4;
+    const LmResult lm = levenbergMarquardt(res, x0, 100);
+    prm.c2 = lm.x[0], prm.c3 = lm.x[1], prm.c4 = lm.x[2];
+    rep.steady_rmse = std::sqrt(2.0 * lm.cost / sweep.size()) * 1e3;
+  }
+  // (b) Rate (and volume terms) from the random data, steady state held.
+  const auto pack = [&](const ParametricParams& q, bool all) {
+    std::vector<double> v = {q.c7, q.c8, q.c9, q.cg};
+    if (fit_volume) { v.push_back(q.c5); v.push_back(q.c6); }
+    if (all) { v.push_back(q.c2); v.push_back(q.c3); v.push_back(q.c4); }
+    return Eigen::Map<Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size())).eval();
+  };
+  const auto unpack = [&](const Eigen::VectorXd& x, bool all) {
+    ParametricParams q = prm;
+    Eigen::Index i = 0;
+    q.c7 = x[i++], q.c8 = x[i++], q.c9 = x[i++], q.cg = x[i++];
+    if (fit_volume) { q.c5 = x[i++]; q.c6 = x[i++]; }
+    if (all) { q.c2 = x[i++]; q.c3 = x[i++]; q.c4 = x[i++]; }
+    return q;
+  };
+  for (bool all : {false, true}) {
+    auto res = [&](const Eigen::VectorXd& x, Eigen::VectorXd& r) { segmentResiduals(random, unpack(x, all), segment, r); };
+    const LmResult lm = levenbergMarquardt(res, pack(prm, all), 80);
+    prm = unpack(lm.x, all);
+    rep.segment_rmse = std::sqrt(2.0 * lm.cost / std::max<Eigen::Index>(1, ((random.size() - 1) / segment) * segment)) * 1e3;
+  }
+  prm.validate();
+  rep.params = prm;
+  return rep;
+}
+
+PredictionReport predictionRmse(const Recording& rec, const ParametricModel& model, double window) {
+  rec.validate();
+  const auto len = static_cast<std::size_t>(std::lround(window / rec.dt));
+  PredictionReport rep;
+  if (len < 1 || len >= rec.size()) return rep;
+  double sq = 0, supply = 0;
+  std::size_t count = 0;
+  for (std::size_t start = 0; start + len < rec.size(); start += len) {
+    double p = rec.pressure[start];
+    for (std::size_t k = start; k < start + len; ++k) {
+      p = model.step(p, rec.volts[k], rec.dt, rec.inputs(k));
+      const double e = p - rec.pressure[k + 1];
+      sq += e * e;
+      supply += rec.supply[k];
+      ++count;
+    }
+    ++rep.windows;
+  }
+  rep.rmse = std::sqrt(sq / count);
+  rep.percent = 100.0 * rep.rmse / (supply / count - rec.room);
+  return rep;
+}
+
+}  // namespace adroit::pneumatics

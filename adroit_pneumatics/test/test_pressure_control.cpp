@@ -1,0 +1,148 @@
+#include <cmath>
+#include <limits>
+
+#include <Eigen/Dense>
+#include <gtest/gtest.h>
+
+#include "adroit_pneumatics/pressure_control.h"
+
+using namespace adroit::pneumatics;
+
+namespace {
+class Linear : public ScalarDynamics {
+ public:
+  Linear(double a, double b) : a_(a), b_(b) {}
+  double step(double p, double u, double* dp, double* du) const override {
+    if (dp) *dp = a_;
+    if (du) *du = b_;
+    return a_ * p + b_ * u;
+  }
+  double a_, b_;
+};
+class Broken : public ScalarDynamics {
+ public:
+  double step(double, double, double* dp, double* du) const override {
+    if (dp) *dp = 1;
+    if (du) *du = 1;
+    return std::numeric_limits<double>::quiet_NaN();
+  }
+};
+}  // namespace
+
+TEST(Ilqg, LinearQuadraticCaseEqualsLqr) {
+  IlqgParams prm;
+  prm.horizon = 30;
+  prm.alpha_p = 1.0, prm.alpha_u = 0.05, prm.alpha_w = 0.02;
+  prm.u_min = -5, prm.u_max = 5;
+  const double a = 0.95, b = 0.04;
+  const Linear f(a, b);
+  std::vector<double> zero(prm.horizon + 1, 0.0);
+  IlqgSolver solver(prm);
+  const double p0 = 0.3, w0 = -0.5;
+  ASSERT_TRUE(solver.solve(f, p0, w0, zero.data(), zero.data(), {}, 1));
+  // Independent finite-horizon Riccati recursion for x = [p, w], cost
+  // x'Qx + u'Ru + 2 x'N u with Q = diag(ap, aw), R = au + aw, N = [0, -aw]'.
+  Eigen::Matrix2d A;
+  A << a, 0, 0, 0;
+  Eigen::Vector2d B(b, 1.0), N(0.0, -prm.alpha_w);
+  Eigen::Matrix2d Q = Eigen::Vector2d(prm.alpha_p, prm.alpha_w).asDiagonal();
+  const double R = prm.alpha_u + prm.alpha_w;
+  Eigen::Matrix2d P;
+  P << prm.alpha_p, 0, 0, 0;
+  std::vector<Eigen::RowVector2d> K(prm.horizon);
+  for (int i = prm.horizon - 1; i >= 0; --i) {
+    const double S = R + B.dot(P * B);
+    const Eigen::RowVector2d L = (B.transpose() * P * A + N.transpose()) / S;
+    K[i] = L;
+    P = Q + A.transpose() * P * A - (A.transpose() * P * B + N) * (B.transpose() * P * A + N.transpose()) / S;
+  }
+  Eigen::Vector2d x(p0, w0);
+  for (int i = 0; i < prm.horizon; ++i) {
+    const double u = -K[i] * x;
+    EXPECT_NEAR(solver.u()[i], u, 1e-9) << i;
+    EXPECT_NEAR(solver.gainP()[i], -K[i](0), 1e-9) << i;
+    EXPECT_NEAR(solver.gainW()[i], -K[i](1), 1e-9) << i;
+    x = Eigen::Vector2d(a * x(0) + b * u, u);
+  }
+}
+
+TEST(Ilqg, RespectsCommandLimits) {
+  IlqgParams prm;
+  prm.horizon = 20;
+  const Linear f(0.9, 0.1);
+  std::vector<double> ref(prm.horizon + 1, 10.0), zero(prm.horizon + 1, 0.0);
+  IlqgSolver solver(prm);
+  ASSERT_TRUE(solver.solve(f, 0.0, 0.0, ref.data(), zero.data(), {}, 5));
+  for (double u : solver.u()) {
+    EXPECT_LE(u, prm.u_max);
+    EXPECT_GE(u, prm.u_min);
+  }
+  EXPECT_DOUBLE_EQ(solver.u()[0], prm.u_max);
+}
+
+TEST(Ilqg, NonFiniteResultIsRejected) {
+  IlqgParams prm;
+  prm.horizon = 10;
+  std::vector<double> ref(prm.horizon + 1, 0.3), zero(prm.horizon + 1, 0.0);
+  IlqgSolver solver(prm);
+  EXPECT_FALSE(solver.solve(Broken(), 0.2, 0.0, ref.data(), zero.data(), {}, 2));
+}
+
+namespace {
+ParametricModel model() {
+  ParametricParams p;
+  p.c2 = 0.05, p.c3 = 2.0, p.c4 = 0.5, p.c7 = 60, p.c9 = 10, p.cg = 0.2;
+  return ParametricModel(p);
+}
+double simulate(PressureController& c, double target, double seconds, double* final_error) {
+  const ParametricModel m = model();
+  ParametricInputs in;
+  in.volume = 1e-6;
+  double p = 150e3, w = 0.0;
+  std::vector<double> ref(101, target);
+  double worst_late = 0;
+  for (int k = 0; k < static_cast<int>(seconds / 0.005); ++k) {
+    const double u = c.update(k * 0.005, p, w, in, ref.data(), 101, 0.005, nullptr);
+    EXPECT_TRUE(std::isfinite(u));
+    p = m.step(p, u, 0.005, in);
+    w = u;
+    if (k * 0.005 > seconds - 0.1) worst_late = std::max(worst_late, std::abs(p - target));
+  }
+  *final_error = worst_late;
+  return p;
+}
+}  // namespace
+
+TEST(IlqgController, TracksAConstantReference) {
+  IlqgPressureController c(model(), IlqgParams{});
+  double err;
+  simulate(c, 400e3, 0.6, &err);
+  EXPECT_LT(err, 2e3);
+}
+
+TEST(PidfController, IntegralRemovesSteadyError) {
+  PidfParams prm;
+  prm.feedforward = false;
+  prm.kp = 2.0, prm.ki = 20.0, prm.kd = 0.0;
+  PidfController c(model(), prm);
+  double err;
+  simulate(c, 350e3, 2.0, &err);
+  EXPECT_LT(err, 2e3);
+}
+
+TEST(IlqgController, PolicyExpiresWithoutNewSolve) {
+  IlqgPressureController c(model(), IlqgParams{}, 1000);
+  ParametricInputs in;
+  std::vector<double> ref(101, 300e3);
+  EXPECT_TRUE(std::isfinite(c.update(0.0, 200e3, 0.0, in, ref.data(), 101, 0.005, nullptr)));
+  EXPECT_TRUE(std::isfinite(c.evaluate(0.49, 200e3, 0.0)));
+  EXPECT_TRUE(std::isnan(c.evaluate(0.51, 200e3, 0.0)));  // past the 0.5 s horizon
+}
+
+TEST(Resample, InterpolatesAndHolds) {
+  const double in[] = {0.0, 10.0, 20.0};
+  double out[5];
+  resampleReference(in, 3, 0.01, 0.0, 0.005, 5, out);
+  EXPECT_DOUBLE_EQ(out[1], 5.0);
+  EXPECT_DOUBLE_EQ(out[4], 20.0);
+}

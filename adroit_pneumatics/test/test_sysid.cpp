@@ -1,0 +1,101 @@
+#include <cmath>
+#include <cstdio>
+
+#include <gtest/gtest.h>
+
+#include "adroit_pneumatics/excitation.h"
+#include "adroit_pneumatics/sysid.h"
+
+using namespace adroit::pneumatics;
+
+namespace {
+Recording generate(const ParametricModel& m, const std::string& kind, double seconds, std::uint64_t seed) {
+  ExcitationParams e;
+  e.kind = kind;
+  e.seed = seed;
+  e.sweep_period = 20.0;
+  Excitation ex(e);
+  Recording r;
+  r.dt = 0.005;
+  double p = 101325;
+  for (int k = 0; k < static_cast<int>(seconds / r.dt); ++k) {
+    const double u = ex.next(k * r.dt, r.dt);
+    const double supply = 620e3 - 10e3 * std::sin(0.3 * k * r.dt);
+    r.volts.push_back(u);
+    r.pressure.push_back(p);
+    r.volume.push_back(1.5e-6);
+    r.volume_rate.push_back(0.0);
+    r.supply.push_back(supply);
+    p = m.step(p, u, r.dt, r.inputs(r.size() - 1));
+  }
+  return r;
+}
+}  // namespace
+
+TEST(Lm, FitsAnExponential) {
+  auto res = [](const Eigen::VectorXd& x, Eigen::VectorXd& r) {
+    r.resize(50);
+    for (int i = 0; i < 50; ++i) r[i] = x[0] * std::exp(-x[1] * i * 0.1) - 3.0 * std::exp(-0.7 * i * 0.1);
+  };
+  const LmResult out = levenbergMarquardt(res, Eigen::Vector2d(1.0, 0.1));
+  EXPECT_NEAR(out.x[0], 3.0, 1e-6);
+  EXPECT_NEAR(out.x[1], 0.7, 1e-6);
+}
+
+TEST(Sysid, RecoversParametricModelFromNoiseFreeData) {
+  ParametricParams truth;
+  truth.c2 = 0.12, truth.c3 = 2.5, truth.c4 = 0.3, truth.c7 = 70, truth.c8 = 0.15, truth.c9 = 12, truth.cg = 0.25;
+  const ParametricModel m(truth);
+  const Recording sweep = generate(m, "sweep", 40.0, 1);
+  const Recording random = generate(m, "random", 30.0, 2);
+  const FitReport rep = fitParametricModel(sweep, random, false);
+  EXPECT_NEAR(rep.params.c2, truth.c2, 0.02);
+  EXPECT_NEAR(rep.params.c7, truth.c7, 0.05 * truth.c7);
+  EXPECT_NEAR(rep.params.c9, truth.c9, 0.05 * truth.c9);
+  const Recording test = generate(m, "random", 20.0, 3);
+  EXPECT_LT(predictionRmse(test, ParametricModel(rep.params)).percent, 0.5);
+}
+
+TEST(Sysid, CsvRoundTripAndErrors) {
+  Recording r;
+  r.dt = 0.005;
+  for (int k = 0; k < 10; ++k) {
+    r.volts.push_back(0.1 * k);
+    r.pressure.push_back(1e5 + k);
+    r.volume.push_back(1e-6);
+    r.volume_rate.push_back(0);
+    r.supply.push_back(6e5);
+  }
+  const std::string path = testing::TempDir() + "/rec.csv";
+  writeRecordingCsv(path, r);
+  const Recording back = readRecordingCsv(path);
+  EXPECT_EQ(back.size(), 10u);
+  EXPECT_NEAR(back.dt, 0.005, 1e-9);
+  EXPECT_DOUBLE_EQ(back.pressure[3], 1e5 + 3);
+  {
+    FILE* f = std::fopen(path.c_str(), "w");
+    std::fputs("t,volts,pressure,volume,volume_rate,supply\n0,1,2,3,4,5\n0.005,1,x,3,4,5\n", f);
+    std::fclose(f);
+  }
+  try {
+    readRecordingCsv(path);
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find(":3:"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Excitation, StaysInRangeAndRejectsUnknownKind) {
+  for (const char* kind : {"steps", "sweep", "random", "chirp"}) {
+    ExcitationParams p;
+    p.kind = kind;
+    Excitation e(p);
+    for (int k = 0; k < 4000; ++k) {
+      const double u = e.next(k * 0.005, 0.005);
+      ASSERT_LE(std::abs(u), p.amplitude + 1e-12) << kind;
+    }
+  }
+  ExcitationParams bad;
+  bad.kind = "noise";
+  EXPECT_THROW(Excitation{bad}, std::invalid_argument);
+}

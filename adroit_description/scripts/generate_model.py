@@ -563,21 +563,9 @@ class Mjcf:
         out.append(f"{ind}</body>")
         return out
 
-    def actuated_tendons(self):
-        return self.tendons
-
-    def home_qpos(self):
-        q = [0.0] * len(self.joints)
-        if self.scene.object_qpos:
-            q += self.scene.object_qpos
-        if self.scene.name == "keypad":
-            q += [0.0] * 12
-        return q
-
-    def rest_qpos(self):
-        q = [j.rest for j in self.joints]
-        if self.scene.object_qpos:
-            q += self.scene.object_qpos
+    def keyframe_qpos(self, robot_q):
+        """qpos of a keyframe: the robot's joints, then the object's free joint, then keys."""
+        q = list(robot_q) + list(self.scene.object_qpos)
         if self.scene.name == "keypad":
             q += [0.0] * 12
         return q
@@ -675,8 +663,8 @@ class Mjcf:
         lines.append("  </custom>")
 
         lines.append("  <keyframe>")
-        lines.append(f'    <key name="home" qpos="{fmt(self.home_qpos())}"/>')
-        lines.append(f'    <key name="rest" qpos="{fmt(self.rest_qpos())}"/>')
+        lines.append(f'    <key name="home" qpos="{fmt(self.keyframe_qpos([0.0] * len(self.joints)))}"/>')
+        lines.append(f'    <key name="rest" qpos="{fmt(self.keyframe_qpos([j.rest for j in self.joints]))}"/>')
         lines.append("  </keyframe>")
         lines.append("</mujoco>")
         return "\n".join(lines) + "\n"

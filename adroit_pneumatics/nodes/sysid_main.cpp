@@ -41,7 +41,8 @@ int main(int argc, char** argv) {
     ParameterSet set;
     set.defaults = fit.params;
     saveParameterSet(out, set);
-    std::printf("steady-state fit RMSE %.2f kPa, segment fit RMSE %.2f kPa\n", fit.steady_rmse / 1e3, fit.segment_rmse / 1e3);
+    std::printf("steady-state fit RMSE %.2f kPa, segment fit RMSE %.2f kPa, dead time %.2f ms\n", fit.steady_rmse / 1e3,
+                fit.segment_rmse / 1e3, fit.params.td * 1e3);
     std::printf("2 s prediction RMSE %.2f kPa = %.2f %% of the working range over %d windows\n", pred.rmse / 1e3,
                 pred.percent, pred.windows);
     std::printf("wrote %s\n", out.c_str());

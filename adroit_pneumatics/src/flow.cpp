@@ -1,6 +1,9 @@
 #include "adroit_pneumatics/flow.h"
 
 #include <algorithm>
+#include <map>
+#include <memory>
+#include <mutex>
 #include <stdexcept>
 #include <string>
 
@@ -39,6 +42,7 @@ FlowTable::FlowTable() {
   for (int i = 0; i <= kSegments + 1; ++i) {
     const double r = std::min(1.0, r_choke_ + i / inv_step_);
     h_[i] = std::max(0.0, std::pow(r, 2.0 / kKappa) - std::pow(r, (kKappa + 1.0) / kKappa));
+    g_[i] = alpha_ * std::sqrt(h_[i]);
   }
   for (int i = 0; i <= kSegments; ++i) {
     const double mid = std::max(0.5 * (h_[i] + h_[i + 1]), 1e-12);
@@ -49,6 +53,24 @@ FlowTable::FlowTable() {
 const FlowTable& flowTable() {
   static const FlowTable table;
   return table;
+}
+
+GompertzTable::GompertzTable(double b) : b_(b) {
+  if (!(b > 0) || !std::isfinite(b)) throw std::invalid_argument("GompertzTable: b must be finite and > 0");
+  // H(x_lo) = exp(-40) and 1 - H(x_hi) = b exp(-x_hi) = 1e-7.
+  x_lo_ = std::log(b / 40.0);
+  x_hi_ = std::log(b / 1e-7);
+  inv_step_ = kSegments / (x_hi_ - x_lo_);
+  for (int i = 0; i <= kSegments + 1; ++i) h_[i] = std::exp(-b * std::exp(-(x_lo_ + i / inv_step_)));
+}
+
+const GompertzTable& gompertzTable(double b) {
+  static std::mutex mutex;
+  static std::map<double, std::unique_ptr<GompertzTable>> tables;
+  std::lock_guard<std::mutex> lock(mutex);
+  auto& slot = tables[b];
+  if (!slot) slot = std::make_unique<GompertzTable>(b);
+  return *slot;
 }
 
 ValveParams valveParams(int which) {

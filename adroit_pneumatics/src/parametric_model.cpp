@@ -13,13 +13,14 @@ constexpr double kCc = 1e6;  // m^3 -> cm^3
 
 void ParametricParams::validate() const {
   const std::pair<const char*, double> fields[] = {{"c2", c2}, {"c3", c3}, {"c4", c4}, {"c5", c5}, {"c6", c6},
-                                                   {"c7", c7}, {"c8", c8}, {"c9", c9}, {"cg", cg}};
+                                                   {"c7", c7}, {"c8", c8}, {"c9", c9}, {"cg", cg}, {"td", td}};
   for (const auto& [name, value] : fields)
     if (!std::isfinite(value)) throw std::invalid_argument(std::string("parametric model: ") + name + " is not finite");
   if (!(cg > 0)) throw std::invalid_argument("parametric model: cg must be > 0");
   if (!(c9 > 0)) throw std::invalid_argument("parametric model: c9 must be > 0 (rate at the valve centre)");
   if (!(c7 >= 0)) throw std::invalid_argument("parametric model: c7 must be >= 0");
   if (!(std::abs(c8) < 1)) throw std::invalid_argument("parametric model: |c8| must be < 1 (rate must stay > 0)");
+  if (!(td >= 0 && td <= 0.05)) throw std::invalid_argument("parametric model: td must be in [0, 0.05] s");
   if (!(c3 > 0) || !(c4 >= 0)) throw std::invalid_argument("parametric model: c3 must be > 0 and c4 >= 0 (monotone s(u))");
 }
 
@@ -75,6 +76,28 @@ double ParametricModel::step(double p, double u, double dt, const ParametricInpu
     *dp_du = dA * E1 + (A * dE1 - dt * p * E) * dk;
   }
   return p * E + A * E1;
+}
+
+double ParametricModel::stepDelayed(double p, double w, double u, double dt, const ParametricInputs& in,
+                                    double* dp_dp, double* dp_dw, double* dp_du) const {
+  const double d = std::min(params_.td, dt);
+  if (d <= 0.0) {
+    if (dp_dw) *dp_dw = 0.0;
+    return step(p, u, dt, in, dp_dp, dp_du);
+  }
+  double a1, b1, a2, b2;
+  const double mid = step(p, w, d, in, &a1, &b1);
+  if (d >= dt) {
+    if (dp_dp) *dp_dp = a1;
+    if (dp_dw) *dp_dw = b1;
+    if (dp_du) *dp_du = 0.0;
+    return mid;
+  }
+  const double next = step(mid, u, dt - d, in, &a2, &b2);
+  if (dp_dp) *dp_dp = a2 * a1;
+  if (dp_dw) *dp_dw = a2 * b1;
+  if (dp_du) *dp_du = b2;
+  return next;
 }
 
 double ParametricModel::inverseSteadyState(double p_des, const ParametricInputs& in, double u_min,

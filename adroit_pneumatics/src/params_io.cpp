@@ -34,6 +34,14 @@ ParametricParams parseParams(const YAML::Node& node, const std::string& where, c
     if (!std::isfinite(x)) throw std::runtime_error(source + ": " + where + "." + f.name + ": not finite");
     p.*(f.member) = x;
   }
+  // Optional (files written before the dead time existed have none): input dead time, s.
+  if (const YAML::Node v = node["td"]) {
+    try {
+      p.td = v.as<double>();
+    } catch (const YAML::Exception&) {
+      throw std::runtime_error(source + ": " + where + ".td: expected a number");
+    }
+  }
   try {
     p.validate();
   } catch (const std::invalid_argument& e) {
@@ -84,6 +92,7 @@ std::string formatParameterSet(const ParameterSet& set) {
       o << (first ? "" : ", ") << f.name << ": " << p.*(f.member);
       first = false;
     }
+    o << ", td: " << p.td;
     o << '}';
     return o.str();
   };

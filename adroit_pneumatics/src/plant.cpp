@@ -26,22 +26,36 @@ CylinderSpec makeSpec(const std::string& type, double bore, double stroke, doubl
   return s;
 }
 
-// (exp(z) - 1) / z, finite at z = 0. The cancellation for |z| >= 1e-5 costs at most
-// ~1e-11 relative.
+// (exp(z) - 1) / z, finite at z = 0. Near zero (|z| <= 0.5, the usual non-stiff step) its
+// Taylor series to z^9 (truncation < 3e-11 relative), which is cheaper than an exp and a
+// division; beyond, the exp form (cancellation costs < 1e-15 there).
 inline double phi1(double z) {
-  return std::abs(z) < 1e-5 ? 1.0 + z * (0.5 + z / 6.0) : (fastExp(z) - 1.0) / z;
+  if (std::abs(z) <= 0.5) {
+    double p = 1.0 / 3628800.0;
+    p = p * z + 1.0 / 362880.0;
+    p = p * z + 1.0 / 40320.0;
+    p = p * z + 1.0 / 5040.0;
+    p = p * z + 1.0 / 720.0;
+    p = p * z + 1.0 / 120.0;
+    p = p * z + 1.0 / 24.0;
+    p = p * z + 1.0 / 6.0;
+    p = p * z + 0.5;
+    return p * z + 1.0;
+  }
+  if (z < -37.0) return -1.0 / z;  // exp(z) < 1e-16: below the rounding of 1
+  return (fastExp(z) - 1.0) / z;
 }
 
 // Right-hand side of eq. 5.3 with the tabulated flow; with_jacobian also gives d/dp.
 // Written out for the usual orientation (room <= p <= supply) so only the flow-reversal
 // cases take the general path.
 template <bool with_jacobian>
-inline double rhs(double p, const ChamberInputs& in, double gain, double volume_term, double* jac,
-                  double* inflow) {
-  const FlowTable& table = flowTable();
+__attribute__((always_inline)) inline double rhs(double p, const ChamberInputs& in, double gain, double volume_term, double* jac,
+                  double* inflow, double inv_supply) {
+  static const FlowTable& table = flowTable();
   double phi_in, din_p, phi_out, dout_p, dummy;
   if (p <= in.supply) {
-    phi_in = in.supply * table.g(p / in.supply, &din_p);
+    phi_in = in.supply * table.g(p * inv_supply, &din_p);
   } else {
     phi_in = table.phi(in.supply, p, &dummy, &din_p);
   }
@@ -71,8 +85,12 @@ CylinderSpec cylinderSpec(const std::string& type) {
                                      kLeakM9 * 16.0 / 9.0, 2);
   if (type == "M24") return makeSpec(type, 0.024, 0.075, 1.0e-7 * (24.0 / 9.0) * (24.0 / 9.0),
                                      kLeakM9 * 24.0 / 9.0, 2);
+  // Arm shoulder/elbow (assumed like the M24: AIRPEL air seal, valve 2, dead volume and
+  // leak scaled with the bore; not thesis data).
+  if (type == "M40") return makeSpec(type, 0.040, 0.100, 1.0e-7 * (40.0 / 9.0) * (40.0 / 9.0),
+                                     kLeakM9 * 40.0 / 9.0, 2);
   throw std::invalid_argument("cylinderSpec: unknown cylinder type '" + type +
-                              "' (known: M9, M16, M24)");
+                              "' (known: M9, M16, M24, M40)");
 }
 
 double chamberPressureRate(double p, const ChamberInputs& in) {
@@ -80,41 +98,57 @@ double chamberPressureRate(double p, const ChamberInputs& in) {
   return kKappa / in.volume * (kRsT * mdot - p * in.volume_rate);
 }
 
-double chamberStep(double p0, double dt, const ChamberInputs& in, double* inlet_mass_flow) {
+namespace {
+// The stages of chamberStep, shared by the scalar function and the plant's batched loop
+// (which runs each stage over all cylinders before the next, so the independent chains of
+// 48 cylinders overlap in the CPU instead of waiting on each other's sqrt/div/exp latency).
+// Both paths do the same operations in the same order: the plant's result is bit-identical
+// to calling chamberStep per cylinder.
+struct Coeffs {
+  double gain, volume_term, inv_supply;
+};
+inline Coeffs coeffs(const ChamberInputs& in, double inv_supply) {
   const double inv_volume = 1.0 / in.volume;
-  const double gain = kKappa * kRsT * inv_volume;
-  const double volume_term = kKappa * in.volume_rate * inv_volume;
-  double j0, j1, q0, q1;
-  const double f0 = rhs<true>(p0, in, gain, volume_term, &j0, &q0);
-  if (inlet_mass_flow) *inlet_mass_flow = q0;
-  if (f0 == 0.0) return p0;
-  // Predictor: exact solution of the linearisation at p0. Bounded so the secant below is
-  // taken over a physically meaningful interval.
+  return {kKappa * kRsT * inv_volume, kKappa * in.volume_rate * inv_volume, inv_supply};
+}
+// Predictor: exact solution of the linearisation at p0. Bounded so the secant below is
+// taken over a physically meaningful interval.
+inline double predictor(double p0, double dt, const ChamberInputs& in, double f0, double j0) {
   const double lo = 0.5 * std::min(p0, in.room);
   const double hi = 2.0 * std::max(p0, in.supply);
-  const double p1 = std::clamp(p0 + dt * phi1(j0 * dt) * f0, std::max(lo, kMinPressure), hi);
-  const double f1 = rhs<false>(p1, in, gain, volume_term, &j1, &q1);
-  // Corrector: same exponential step with the secant slope over [p0, p1].
+  return std::clamp(p0 + dt * phi1(j0 * dt) * f0, std::max(lo, kMinPressure), hi);
+}
+// Corrector: same exponential step with the secant slope over [p0, p1]. Returns p2 and
+// whether the step was stiff (then stiffTail decides).
+inline double corrector(double p0, double p1, double dt, double f0, double f1, double j0, bool* stiff) {
   const double js = (p1 != p0) ? (f1 - f0) / (p1 - p0) : j0;
-  const double p2 = std::max(p0 + dt * phi1(js * dt) * f0, kMinPressure);
-  if (std::min(j0, js) * dt > -1.0) return p2;
-  // Stiff (small volume, or the square-root edge of the flow near equilibrium). With
-  // constant inputs the scalar solution is monotone and cannot cross an equilibrium; if a
-  // stage crossed one, find that root of f (Illinois regula falsi on the bracket) and take
-  // the exponential approach to it with the secant rate from p0. Exact for linear f, never
-  // overshoots, and lands on the quasi-static equilibrium in the stiff limit.
-  double pa = p0, fa = f0, pb = p1, fb = f1;
+  *stiff = !(std::min(j0, js) * dt > -1.0);
+  return std::max(p0 + dt * phi1(js * dt) * f0, kMinPressure);
+}
+// Stiff (small volume, or the square-root edge of the flow near equilibrium). With
+// constant inputs the scalar solution is monotone and cannot cross an equilibrium; if a
+// stage crossed one, find that root of f (Illinois regula falsi on the bracket) and take
+// the exponential approach to it with the secant rate from p0. Exact for linear f, never
+// overshoots, and lands on the quasi-static equilibrium in the stiff limit.
+// Needs f2 = f(p2) only when f1 has the sign of f0 and p2 is not between p0 and p1 (see
+// needF2; otherwise it is unused).
+inline double stiffTail(double p0, double p1, double p2, double dt, double f0, double f1, double f2,
+                        const ChamberInputs& in, const Coeffs& k) {
+  double pa = p0, fa = f0, pb = p1, fb = f1, j1, q1;
   if ((f1 > 0) == (f0 > 0)) {
+    // f is monotone in p (flow decreasing, compression term small against it), so with f0
+    // and f1 of one sign nothing between p0 and p1 crosses zero.
+    if ((p2 - p0) * (p2 - p1) <= 0.0) return p2;
     pa = p1, fa = f1;
     pb = p2;
-    fb = rhs<false>(pb, in, gain, volume_term, &j1, &q1);
+    fb = f2;
     if ((fb > 0) == (f0 > 0)) return p2;  // no crossing: the corrector is monotone
   }
   double root = pb;
   int side = 0;
   for (int it = 0; it < 40; ++it) {
     root = (pa * fb - pb * fa) / (fb - fa);
-    const double fr = rhs<false>(root, in, gain, volume_term, &j1, &q1);
+    const double fr = rhs<false>(root, in, k.gain, k.volume_term, &j1, &q1, k.inv_supply);
     if (std::abs(pb - pa) < 1.0 || fr == 0.0) break;
     if ((fr > 0) == (fb > 0)) {
       pb = root, fb = fr;
@@ -130,6 +164,25 @@ double chamberStep(double p0, double dt, const ChamberInputs& in, double* inlet_
   if (root == p0) return p0;
   const double rate = f0 / (p0 - root);  // < 0: secant slope from p0 to the equilibrium
   return std::max(root + (p0 - root) * fastExp(rate * dt), kMinPressure);
+}
+inline bool needF2(double p0, double p1, double p2, double f0, double f1) {
+  return ((f1 > 0) == (f0 > 0)) && (p2 - p0) * (p2 - p1) > 0.0;
+}
+}  // namespace
+
+double chamberStep(double p0, double dt, const ChamberInputs& in, double* inlet_mass_flow) {
+  const Coeffs k = coeffs(in, 1.0 / in.supply);
+  double j0, j1, q0, q1;
+  const double f0 = rhs<true>(p0, in, k.gain, k.volume_term, &j0, &q0, k.inv_supply);
+  if (inlet_mass_flow) *inlet_mass_flow = q0;
+  if (f0 == 0.0) return p0;
+  const double p1 = predictor(p0, dt, in, f0, j0);
+  const double f1 = rhs<false>(p1, in, k.gain, k.volume_term, &j1, &q1, k.inv_supply);
+  bool stiff;
+  const double p2 = corrector(p0, p1, dt, f0, f1, j0, &stiff);
+  if (!stiff) return p2;
+  const double f2 = needF2(p0, p1, p2, f0, f1) ? rhs<false>(p2, in, k.gain, k.volume_term, &j1, &q1, k.inv_supply) : 0.0;
+  return stiffTail(p0, p1, p2, dt, f0, f1, f2, in, k);
 }
 
 PneumaticPlant::PneumaticPlant(std::vector<CylinderSpec> specs, const SupplyParams& supply,
@@ -167,14 +220,18 @@ PneumaticPlant::PneumaticPlant(std::vector<CylinderSpec> specs, const SupplyPara
   inlet_area_.assign(n, 0.0);
   outlet_area_.assign(n, 0.0);
   last_volts_ = history_volts_;
+  auto fast = [](const GompertzArea& g) {
+    FastPort f;
+    f.offset = g.offset, f.a = g.a, f.c = g.c, f.cd = g.c * g.d;
+    f.table = &gompertzTable(g.b);
+    return f;
+  };
+  for (const auto& s : specs_) {
+    fast_inlet_.push_back(fast(s.valve.inlet));
+    fast_exhaust_.push_back(fast(s.valve.exhaust));
+  }
 }
 
-void PneumaticPlant::updateAreas(std::size_t i, double volts) {
-  if (volts == applied_volts_[i]) return;  // areas depend only on the command
-  applied_volts_[i] = volts;
-  inlet_area_[i] = specs_[i].valve.inlet(volts);
-  outlet_area_[i] = specs_[i].valve.exhaust(volts) + specs_[i].leak_area;
-}
 
 double PneumaticPlant::tension(std::size_t i) const {
   return std::max(0.0, (pressure_[i] - supply_params_.atmospheric_pressure) * specs_[i].bore_area);
@@ -202,9 +259,9 @@ void PneumaticPlant::step(double dt, const double* volts, const double* travel, 
 
   const double room = supply_params_.atmospheric_pressure;
   double total_inflow = 0.0;
-  ChamberInputs in;
-  in.supply = supply_pressure_;
-  in.room = room;
+  // Stage-by-stage over all cylinders (see chamberStep; same operations, same result).
+  Work& w = work_;
+  w.resize(n);
   for (std::size_t i = 0; i < n; ++i) {
     const CylinderSpec& s = specs_[i];
     updateAreas(i, acting_volts[i]);
@@ -215,14 +272,41 @@ void PneumaticPlant::step(double dt, const double* volts, const double* travel, 
     // At an end stop the piston cannot move further out of range.
     if (x <= 0.0) { x = 0.0; xdot = std::max(0.0, xdot); }
     if (x >= s.stroke) { x = s.stroke; xdot = std::min(0.0, xdot); }
+    ChamberInputs& in = w.in[i];
+    in.supply = supply_pressure_;
+    in.room = room;
     in.inlet_area = inlet_area_[i];
     in.outlet_area = outlet_area_[i];
     in.volume = s.dead_volume + s.bore_area * x;
     in.volume_rate = s.bore_area * xdot;
-    double inflow;
-    pressure_[i] = chamberStep(pressure_[i], dt, in, &inflow);
-    total_inflow += std::max(0.0, inflow);
   }
+  double dummy_j, dummy_q;
+  const double inv_supply = 1.0 / supply_pressure_;  // the same for every cylinder
+  for (std::size_t i = 0; i < n; ++i) {
+    const Coeffs k = coeffs(w.in[i], inv_supply);
+    w.gain[i] = k.gain;
+    w.volume_term[i] = k.volume_term;
+    w.f0[i] = rhs<true>(pressure_[i], w.in[i], k.gain, k.volume_term, &w.j0[i], &w.q0[i], inv_supply);
+    total_inflow += std::max(0.0, w.q0[i]);
+  }
+  for (std::size_t i = 0; i < n; ++i)
+    w.p1[i] = w.f0[i] == 0.0 ? pressure_[i] : predictor(pressure_[i], dt, w.in[i], w.f0[i], w.j0[i]);
+  for (std::size_t i = 0; i < n; ++i)
+    w.f1[i] = rhs<false>(w.p1[i], w.in[i], w.gain[i], w.volume_term[i], &dummy_j, &dummy_q, inv_supply);
+  w.stiff.clear();
+  for (std::size_t i = 0; i < n; ++i) {
+    if (w.f0[i] == 0.0) { w.p2[i] = pressure_[i]; continue; }
+    bool stiff;
+    w.p2[i] = corrector(pressure_[i], w.p1[i], dt, w.f0[i], w.f1[i], w.j0[i], &stiff);
+    if (stiff) w.stiff.push_back(i);
+  }
+  for (std::size_t i : w.stiff)
+    w.f2[i] = needF2(pressure_[i], w.p1[i], w.p2[i], w.f0[i], w.f1[i])
+                  ? rhs<false>(w.p2[i], w.in[i], w.gain[i], w.volume_term[i], &dummy_j, &dummy_q, inv_supply)
+                  : 0.0;
+  for (std::size_t i : w.stiff)
+    w.p2[i] = stiffTail(pressure_[i], w.p1[i], w.p2[i], dt, w.f0[i], w.f1[i], w.f2[i], w.in[i], Coeffs{w.gain[i], w.volume_term[i], inv_supply});
+  for (std::size_t i = 0; i < n; ++i) pressure_[i] = w.p2[i];
   // Supply: first-order lag towards its flow-dependent set point (exact over dt).
   const double target = supply_enabled_
                             ? supply_params_.nominal_pressure - supply_params_.sag_per_mass_flow * total_inflow
@@ -230,6 +314,13 @@ void PneumaticPlant::step(double dt, const double* volts, const double* travel, 
   const double blend = -std::expm1(-dt / supply_params_.time_constant);
   supply_pressure_ = std::max(room, supply_pressure_ + (target - supply_pressure_) * blend);
   time_ += dt;
+}
+
+void PneumaticPlant::Work::resize(std::size_t n) {
+  if (in.size() == n) return;
+  in.resize(n);
+  for (auto* v : {&gain, &volume_term, &f0, &j0, &q0, &p1, &f1, &p2, &f2}) v->resize(n);
+  stiff.reserve(n);
 }
 
 PlantState PneumaticPlant::state() const {

@@ -16,20 +16,95 @@ bool allFinite(const std::vector<double>& v) {
   return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x); });
 }
 
-// Parametric model in MPa with inputs frozen over the horizon (v, vdot are sensor inputs, 5.5.5).
+// Parametric model in MPa with inputs frozen over the horizon (v, vdot are sensor inputs,
+// 5.5.5), the model's input dead time (the previous command w acts for the first td of each
+// step), and the offset-free disturbance: a constant pressure-rate bias d added to the model,
+// which over one step adds d * dt (the controller estimates d from its one-step prediction
+// error, so model bias, leak and unmodelled volume effects do not leave a steady offset).
 class ParametricDynamics : public ScalarDynamics {
  public:
-  ParametricDynamics(const ParametricModel& m, const ParametricInputs& in, double dt) : m_(m), in_(in), dt_(dt) {}
+  ParametricDynamics(const ParametricModel& m, const ParametricInputs& in, double dt, double bias_pa_per_s = 0.0)
+      : m_(m), in_(in), dt_(dt), bias_(bias_pa_per_s * dt * kMPa), td_(std::min(m.params().td, dt)),
+        inv_tau_(1.0 / m.tau(in)), c5v_(m.params().c5 * in.volume_rate * 1e6) {}
   double step(double p, double u, double* dp, double* du) const override {
-    const double next = m_.step(p / kMPa, u, dt_, in_, dp, du);
-    if (du) *du *= kMPa;
-    return next * kMPa;
+    if (!dp && !du) return exact<false>(p / kMPa, terms(u), dt_, nullptr, nullptr) * kMPa + bias_;
+    double a, b;
+    const double next = exact<true>(p / kMPa, terms(u), dt_, &a, &b);
+    if (dp) *dp = a;
+    if (du) *du = b * kMPa;
+    return next * kMPa + bias_;
+  }
+  // Same formulas as ParametricModel::stepDelayed / step, with the command terms s(u),
+  // r(u) cached: in a rollout w_i = u_{i-1}, so each command's terms are computed once.
+  double stepWithMemory(double p, double w, double u, double* dp, double* dw, double* du) const override {
+    if (td_ <= 0.0) {
+      if (dw) *dw = 0.0;
+      return step(p, u, dp, du);
+    }
+    if (!dp && !dw && !du) {  // rollout: values only
+      const double mid = exact<false>(p / kMPa, terms(w), td_, nullptr, nullptr);
+      if (td_ >= dt_) return mid * kMPa + bias_;
+      return exact<false>(mid, terms(u), dt_ - td_, nullptr, nullptr) * kMPa + bias_;
+    }
+    double a1, b1, a2, b2;
+    const double mid = exact<true>(p / kMPa, terms(w), td_, &a1, &b1);
+    if (td_ >= dt_) {
+      if (dp) *dp = a1;
+      if (dw) *dw = b1 * kMPa;
+      if (du) *du = 0.0;
+      return mid * kMPa + bias_;
+    }
+    const double next = exact<true>(mid, terms(u), dt_ - td_, &a2, &b2);
+    if (dp) *dp = a2 * a1;
+    if (dw) *dw = a2 * b1 * kMPa;
+    if (du) *du = b2 * kMPa;
+    return next * kMPa + bias_;
   }
 
  private:
+  struct Terms {
+    double u = std::numeric_limits<double>::quiet_NaN(), s = 0, ds = 0, r = 0, dr = 0;
+  };
+  const Terms& terms(double u) const {
+    if (cache_[0].u == u) return cache_[0];
+    if (cache_[1].u == u) return cache_[1];
+    Terms& t = cache_[next_];
+    next_ ^= 1;
+    t.u = u;
+    t.s = m_.steadyState(u, in_, &t.ds);
+    t.r = m_.rate(u, &t.dr);
+    return t;
+  }
+  // ParametricModel::step: pdot = A - k p, A = s r / tau, k = (r - c5 vdot) / tau.
+  template <bool derivatives>
+  double exact(double p, const Terms& t, double dt, double* dp_dp, double* dp_du) const {
+    const double A = t.s * t.r * inv_tau_;
+    const double k = (t.r - c5v_) * inv_tau_;
+    const double x = k * dt;
+    const double E = fastExp(-x);
+    double E1, dE1 = 0;
+    if (std::abs(x) < 1e-4) {
+      E1 = dt * (1.0 - x * (0.5 - x / 6.0));
+      if (derivatives) dE1 = dt * dt * (-0.5 + x / 3.0);
+    } else {
+      const double inv_k = 1.0 / k;
+      E1 = (1.0 - E) * inv_k;
+      if (derivatives) dE1 = (dt * E - E1) * inv_k;
+    }
+    if (derivatives) {
+      *dp_dp = E;
+      const double dA = (t.ds * t.r + t.s * t.dr) * inv_tau_;
+      const double dk = t.dr * inv_tau_;
+      *dp_du = dA * E1 + (A * dE1 - dt * p * E) * dk;
+    }
+    return p * E + A * E1;
+  }
+
   const ParametricModel& m_;
   ParametricInputs in_;
-  double dt_;
+  double dt_, bias_, td_, inv_tau_, c5v_;
+  mutable Terms cache_[2];
+  mutable int next_ = 0;
 };
 }  // namespace
 
@@ -43,6 +118,12 @@ void IlqgParams::validate() const {
   if (iterations < 1) throw std::invalid_argument("ilqg: iterations must be >= 1");
   if (!(feedback_fraction >= 0 && feedback_fraction <= 1))
     throw std::invalid_argument("ilqg: feedback_fraction must be in [0, 1]");
+  if (!(disturbance_gain >= 0 && disturbance_gain <= 1))
+    throw std::invalid_argument("ilqg: disturbance_gain must be in [0, 1]");
+  if (!(measurement_gain > 0 && measurement_gain <= 1))
+    throw std::invalid_argument("ilqg: measurement_gain must be in (0, 1]");
+  if (!(disturbance_limit >= 0) || !std::isfinite(disturbance_limit))
+    throw std::invalid_argument("ilqg: disturbance_limit must be finite and >= 0");
 }
 
 IlqgSolver::IlqgSolver(const IlqgParams& params) : params_(params) {
@@ -53,6 +134,7 @@ IlqgSolver::IlqgSolver(const IlqgParams& params) : params_(params) {
   u_.assign(n, 0.0);
   a_.assign(n, 0.0);
   b_.assign(n, 0.0);
+  c_.assign(n, 0.0);
   kff_.assign(n, 0.0);
   kp_.assign(n, 0.0);
   kw_.assign(n, 0.0);
@@ -78,7 +160,7 @@ double IlqgSolver::rollout(const ScalarDynamics& f, double p0, double w0, const 
     u[i] = ui;
     const double ep = p_ref[i] - p[i], eu = u_des[i] - ui, ew = ui - w[i];
     cost += ap * ep * ep + au * eu * eu + aw * ew * ew;
-    p[i + 1] = f.step(p[i], ui, nullptr, nullptr);
+    p[i + 1] = f.stepWithMemory(p[i], w[i], ui, nullptr, nullptr, nullptr);
     w[i + 1] = ui;
   }
   const double ep = p_ref[n] - p[n];
@@ -92,20 +174,22 @@ bool IlqgSolver::backward(const double* p_ref, const double* u_des, double reg, 
   double V1 = -2.0 * ap * (p_ref[n] - p_[n]), V2 = 0, V11 = 2.0 * ap, V12 = 0, V22 = 0;
   double dv = 0;
   for (int i = n - 1; i >= 0; --i) {
-    const double a = a_[i], b = b_[i], u = u_[i];
+    const double a = a_[i], b = b_[i], c = c_[i], u = u_[i];
     // Cost derivatives (l = ap (pr - p)^2 + au (ud - u)^2 + aw (u - w)^2).
     const double lp = -2.0 * ap * (p_ref[i] - p_[i]);
     const double lw = -2.0 * aw * (u - w_[i]);
     const double lu = -2.0 * au * (u_des[i] - u) + 2.0 * aw * (u - w_[i]);
-    // Next state [a p + b u, u]: fx = [[a, 0], [0, 0]], fu = [b, 1].
+    // Next state [a p + c w + b u, u]: fx = [[a, c], [0, 0]], fu = [b, 1] (c = dp'/dw is
+    // the dead time's share of the previous command; 0 without dead time).
     const double Qp = lp + a * V1;
-    const double Qw = lw;
+    const double Qw = lw + c * V1;
     const double Qu = lu + b * V1 + V2;
     const double Qpp = 2.0 * ap + a * a * V11;
-    const double Qww = 2.0 * aw;
+    const double Qpw = a * c * V11;
+    const double Qww = 2.0 * aw + c * c * V11;
     const double Quu = 2.0 * au + 2.0 * aw + b * b * V11 + 2.0 * b * V12 + V22;
     const double Qup = a * (b * V11 + V12);
-    const double Quw = -2.0 * aw;
+    const double Quw = -2.0 * aw + c * (b * V11 + V12);
     const double H = Quu + reg;
     if (!(H > 0)) return false;
     double k = -Qu / H, Kp = -Qup / H, Kw = -Quw / H;
@@ -117,11 +201,11 @@ bool IlqgSolver::backward(const double* p_ref, const double* u_des, double reg, 
     kp_[i] = Kp;
     kw_[i] = Kw;
     dv += k * Qu + 0.5 * k * k * Quu;
-    // V = Q with u = k + K dx substituted (Qpw = 0 here).
+    // V = Q with u = k + K dx substituted.
     V1 = Qp + Kp * Quu * k + Kp * Qu + Qup * k;
     V2 = Qw + Kw * Quu * k + Kw * Qu + Quw * k;
     V11 = Qpp + Kp * Quu * Kp + 2.0 * Kp * Qup;
-    V12 = Kp * Quu * Kw + Kp * Quw + Qup * Kw;
+    V12 = Qpw + Kp * Quu * Kw + Kp * Quw + Qup * Kw;
     V22 = Qww + Kw * Quu * Kw + 2.0 * Kw * Quw;
   }
   *expected = dv;
@@ -140,13 +224,19 @@ bool IlqgSolver::solve(const ScalarDynamics& f, double p0, double w0, const doub
   w_.swap(w);
   u_.swap(u);
   double reg = 0.0;
+  // Gains of the last successful backward pass are kept for the policy (standard iLQG: the
+  // policy is u_new + K (x - x_new) with K from the pass that produced u_new); only when no
+  // backward pass succeeded is one run on the final trajectory. This saves a derivative and
+  // a backward pass per solve (a third of the cost at one iteration).
+  bool have_gains = false;
   for (int it = 0; it < iterations; ++it) {
-    for (int i = 0; i < n; ++i) f.step(p_[i], u_[i], &a_[i], &b_[i]);
+    for (int i = 0; i < n; ++i) f.stepWithMemory(p_[i], w_[i], u_[i], &a_[i], &c_[i], &b_[i]);
     double expected = 0;
     if (!backward(p_ref, u_des, reg, &expected)) {
       reg = std::max(1e-6, reg * 10.0);
       continue;
     }
+    have_gains = true;
     if (expected > -1e-14) break;  // converged: no descent left
     bool accepted = false;
     for (double step : {1.0, 0.5, 0.25, 0.1}) {
@@ -163,10 +253,11 @@ bool IlqgSolver::solve(const ScalarDynamics& f, double p0, double w0, const doub
     if (!accepted) reg = std::max(1e-6, reg * 10.0);
     else reg *= 0.1;
   }
-  // Gains of the final trajectory for the policy.
-  for (int i = 0; i < n; ++i) f.step(p_[i], u_[i], &a_[i], &b_[i]);
-  double expected;
-  if (!backward(p_ref, u_des, reg, &expected) && !backward(p_ref, u_des, std::max(reg, 1e-6), &expected)) return false;
+  if (!have_gains) {
+    for (int i = 0; i < n; ++i) f.stepWithMemory(p_[i], w_[i], u_[i], &a_[i], &c_[i], &b_[i]);
+    double expected;
+    if (!backward(p_ref, u_des, reg, &expected) && !backward(p_ref, u_des, std::max(reg, 1e-6), &expected)) return false;
+  }
   cost_ = cost;
   return allFinite(u_) && allFinite(p_) && allFinite(kp_) && allFinite(kw_);
 }
@@ -179,6 +270,35 @@ void IlqgPressureController::reset() {
   tick_ = 0;
   policy_ = Policy{};
   warm_.clear();
+  have_last_ = false;
+  disturbance_ = 0.0;
+}
+
+void IlqgPressureController::updateDisturbance(double t, double p_meas, double w_last, const ParametricInputs& in) {
+  // Offset-free MPC (disturbance model x_d' = x_d, estimated from the one-step prediction
+  // error). Over [last_t, t] the valve held last tick's command (w then) for the dead time
+  // and this tick's w_last (the command actually applied) after it. The model's prediction
+  // from the last measurement, plus the current bias, is compared with the new measurement;
+  // the bias moves by a fraction of the error rate. With the true bias D the estimate obeys
+  // d <- d + g (D - d) + noise: a first-order filter of D with pole 1 - g.
+  // last_p_ is the previous estimate (the measurement when measurement_gain = 1).
+  const IlqgParams& prm = solver_.params();
+  p_est_ = p_meas;
+  if (have_last_ && std::isfinite(p_meas)) {
+    const double dt = t - last_t_;
+    if (dt > 0 && dt < 0.1) {
+      const double pred = model_.stepDelayed(last_p_, last_w_, w_last, dt, last_in_) + disturbance_ * dt;
+      const double e = p_meas - pred;
+      if (prm.disturbance_gain > 0) {
+        const double next = disturbance_ + prm.disturbance_gain * e / dt;
+        if (std::isfinite(next)) disturbance_ = std::clamp(next, -prm.disturbance_limit, prm.disturbance_limit);
+      }
+      if (std::isfinite(pred)) p_est_ = pred + prm.measurement_gain * e;
+    } else if (!(dt > 0)) {
+      disturbance_ = 0.0;  // time went backwards: start over
+    }
+  }
+  (void)in;
 }
 
 double IlqgPressureController::evaluate(double t, double p_meas, double w_last) const {
@@ -197,26 +317,13 @@ double IlqgPressureController::update(double t, double p_meas, double w_last, co
   const IlqgParams& prm = solver_.params();
   const int n = prm.horizon;
   if (stats) *stats = ControlStats{};
+  updateDisturbance(t, p_meas, w_last, in);
   const bool due = (tick_++ % solve_every_) == 0 || !policy_.valid;
   if (due && n_ref > 0 && std::isfinite(p_meas) && std::isfinite(w_last)) {
     const auto start = std::chrono::steady_clock::now();
     p_ref_mpa_.resize(n + 1);
     u_des_.resize(n + 1);
     resampleReference(p_ref, n_ref, dt_ref, 0.0, prm.dt, n + 1, p_ref_mpa_.data());
-    // Desired command = model steady-state inverse of the reference. It is smooth in
-    // time, so solve it every 10th sample and interpolate (it dominated the solve time).
-    constexpr int kEvery = 10;
-    for (int i = 0; i <= n; i += kEvery)
-      u_des_[i] = model_.inverseSteadyState(p_ref_mpa_[i], in, prm.u_min, prm.u_max);
-    const int last = (n / kEvery) * kEvery;
-    if (last != n) u_des_[n] = model_.inverseSteadyState(p_ref_mpa_[n], in, prm.u_min, prm.u_max);
-    for (int i = 0; i <= n; ++i) {
-      if (i % kEvery != 0 && i != n) {
-        const int a = (i / kEvery) * kEvery, b = std::min(a + kEvery, n);
-        u_des_[i] = u_des_[a] + (u_des_[b] - u_des_[a]) * (i - a) / static_cast<double>(b - a);
-      }
-      p_ref_mpa_[i] *= kMPa;
-    }
     // Warm start: previous controls shifted by the time elapsed since that solve.
     warm_.clear();
     if (policy_.valid) {
@@ -226,8 +333,28 @@ double IlqgPressureController::update(double t, double p_meas, double w_last, co
         warm_.push_back(policy_.u[j]);
       }
     }
-    const ParametricDynamics dyn(model_, in, prm.dt);
-    const bool ok = solver_.solve(dyn, p_meas * kMPa, w_last, p_ref_mpa_.data(), u_des_.data(), warm_, prm.iterations);
+    if (prm.u_des_steady_state) {
+      // Model steady-state inverse of the reference. Smooth in time, so solved every 10th
+      // sample and interpolated.
+      constexpr int kEvery = 10;
+      for (int i = 0; i <= n; i += kEvery)
+        u_des_[i] = model_.inverseSteadyState(p_ref_mpa_[i], in, prm.u_min, prm.u_max);
+      const int last = (n / kEvery) * kEvery;
+      if (last != n) u_des_[n] = model_.inverseSteadyState(p_ref_mpa_[n], in, prm.u_min, prm.u_max);
+      for (int i = 0; i <= n; ++i) {
+        if (i % kEvery != 0 && i != n) {
+          const int a = (i / kEvery) * kEvery, b = std::min(a + kEvery, n);
+          u_des_[i] = u_des_[a] + (u_des_[b] - u_des_[a]) * (i - a) / static_cast<double>(b - a);
+        }
+      }
+    } else {
+      // Proximal: stay near the previous plan (or the applied command before the first
+      // solve). It cannot bias where the plan settles, only how far one solve moves it.
+      for (int i = 0; i <= n; ++i) u_des_[i] = warm_.empty() ? w_last : warm_[std::min(i, n - 1)];
+    }
+    for (int i = 0; i <= n; ++i) p_ref_mpa_[i] *= kMPa;
+    const ParametricDynamics dyn(model_, in, prm.dt, disturbance_);
+    const bool ok = solver_.solve(dyn, p_est_ * kMPa, w_last, p_ref_mpa_.data(), u_des_.data(), warm_, prm.iterations);
     if (ok) {
       policy_.valid = true;
       policy_.t0 = t;
@@ -244,7 +371,14 @@ double IlqgPressureController::update(double t, double p_meas, double w_last, co
       stats->solve_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     }
   }
-  return evaluate(t, p_meas, w_last);
+  if (std::isfinite(p_meas) && std::isfinite(w_last)) {
+    have_last_ = true;
+    last_t_ = t;
+    last_p_ = p_est_;
+    last_w_ = w_last;
+    last_in_ = in;
+  }
+  return evaluate(t, p_est_, w_last);
 }
 
 void PidfParams::validate() const {

@@ -138,7 +138,8 @@ bool tryModel(const ParametricParams& p, ParametricModel* m) {
 }
 
 // Multi-step simulation residuals over consecutive segments (each starts from the measured
-// pressure). Residuals are in kPa to keep LM well scaled.
+// pressure). Residuals are in kPa to keep LM well scaled. The command of the previous
+// sample acts for the first td of each sample (stepDelayed).
 void segmentResiduals(const Recording& rec, const ParametricParams& prm, int segment, Eigen::VectorXd& r) {
   const std::size_t n = rec.size();
   const std::size_t count = (n - 1) / segment;
@@ -153,23 +154,46 @@ void segmentResiduals(const Recording& rec, const ParametricParams& prm, int seg
     std::size_t k = s * segment;
     double p = rec.pressure[k];
     for (int j = 0; j < segment; ++j, ++k) {
-      p = m.step(p, rec.volts[k], rec.dt, rec.inputs(k));
+      p = m.stepDelayed(p, rec.volts[k > 0 ? k - 1 : 0], rec.volts[k], rec.dt, rec.inputs(k));
       r[idx++] = std::isfinite(p) ? (p - rec.pressure[k + 1]) * 1e-3 : 1e6;
     }
   }
+}
+
+double segmentCost(const Recording& rec, const ParametricParams& prm, int segment) {
+  Eigen::VectorXd r;
+  segmentResiduals(rec, prm, segment, r);
+  return r.squaredNorm();
 }
 
 }  // namespace
 
 FitReport fitParametricModel(const Recording& sweep, const Recording& random, bool fit_volume, int segment,
                              const ParametricParams& initial) {
+  FitOptions o;
+  o.fit_volume = fit_volume;
+  o.segment = segment;
+  return fitParametricModel(sweep, random, o, initial);
+}
+
+FitReport fitParametricModel(const Recording& sweep, const Recording& random, const FitOptions& opt,
+                             const ParametricParams& initial) {
   sweep.validate();
   random.validate();
+  const int segment = opt.segment;
   if (segment < 1 || static_cast<std::size_t>(segment) >= random.size())
     throw std::invalid_argument("fitParametricModel: segment must be in [1, samples)");
+  const bool fit_volume = opt.fit_volume, fit_td = opt.fit_dead_time;
+  // Without piston motion in the data c5 cannot be identified: it is tied to the physical
+  // ratio c5 = -kappa c6 (tau ~ c6 v for c6 v >> 1 and the compression term -kappa p vdot / v
+  // of eq. 5.3a), so a model identified at several locked volumes still knows vdot.
+  const bool tie_c5 = fit_volume && std::all_of(random.volume_rate.begin(), random.volume_rate.end(),
+                                                [](double v) { return v == 0.0; });
   FitReport rep;
   ParametricParams prm = initial;
-  // (a) Steady state: the slow sweep drags the equilibrium along, p ~ s(u).
+  // (a) Steady state: the slow sweep drags the equilibrium along, p ~ s(u). The valve's
+  // steady state is a near-step around its centre (both ports almost closed, fig. 5.4), so
+  // the starting points range from a gentle to a steep sigmoid; the best fit is kept.
   {
     auto res = [&](const Eigen::VectorXd& x, Eigen::VectorXd& r) {
       ParametricParams q = prm;
@@ -180,16 +204,25 @@ FitReport fitParametricModel(const Recording& sweep, const Recording& random, bo
       for (std::size_t k = 0; k < sweep.size(); ++k)
         r[k] = (m.steadyState(sweep.volts[k], sweep.inputs(k)) - sweep.pressure[k]) * 1e-3;
     };
-    Eigen::VectorXd x0(3);
-    x0 << prm.c2, prm.c3, prm.c4;
-    const LmResult lm = levenbergMarquardt(res, x0, 100);
-    prm.c2 = lm.x[0], prm.c3 = lm.x[1], prm.c4 = lm.x[2];
-    rep.steady_rmse = std::sqrt(2.0 * lm.cost / sweep.size()) * 1e3;
+    std::vector<Eigen::Vector3d> starts = {{prm.c2, prm.c3, prm.c4}};
+    if (opt.multi_start)
+      for (double c3 : {1.0, 4.0, 12.0})
+        for (double c4 : {0.1, 5.0, 100.0}) starts.emplace_back(prm.c2, c3, c4);
+    double best = 1e300;
+    for (const Eigen::Vector3d& x0 : starts) {
+      const LmResult lm = levenbergMarquardt(res, x0, 100);
+      if (lm.cost < best) {
+        best = lm.cost;
+        prm.c2 = lm.x[0], prm.c3 = lm.x[1], prm.c4 = lm.x[2];
+      }
+    }
+    rep.steady_rmse = std::sqrt(2.0 * best / sweep.size()) * 1e3;
   }
-  // (b) Rate (and volume terms) from the random data, steady state held.
+  // (b) Rate (and volume terms, dead time) from the random data, steady state held.
   const auto pack = [&](const ParametricParams& q, bool all) {
     std::vector<double> v = {q.c7, q.c8, q.c9, q.cg};
     if (fit_volume) { v.push_back(q.c5); v.push_back(q.c6); }
+    if (fit_td) v.push_back(q.td * 1e3);  // ms: same scale as the others
     if (all) { v.push_back(q.c2); v.push_back(q.c3); v.push_back(q.c4); }
     return Eigen::Map<Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size())).eval();
   };
@@ -198,15 +231,56 @@ FitReport fitParametricModel(const Recording& sweep, const Recording& random, bo
     Eigen::Index i = 0;
     q.c7 = x[i++], q.c8 = x[i++], q.c9 = x[i++], q.cg = x[i++];
     if (fit_volume) { q.c5 = x[i++]; q.c6 = x[i++]; }
+    if (tie_c5) q.c5 = -constants::kKappa * q.c6;
+    if (fit_td) q.td = x[i++] * 1e-3;
     if (all) { q.c2 = x[i++]; q.c3 = x[i++]; q.c4 = x[i++]; }
     return q;
   };
+  // Multi-start for the rate: the cost is evaluated at a small grid of (c7, c9, cg, c6, td),
+  // and LM starts from the best few.
+  if (opt.multi_start) {
+    std::vector<std::pair<double, ParametricParams>> cands;
+    for (double c7 : {30.0, 100.0, 300.0})
+      for (double c9 : {5.0, 20.0})
+        for (double c6 : fit_volume ? std::vector<double>{0.0, 1.0, 5.0} : std::vector<double>{prm.c6})
+          for (double td : fit_td ? std::vector<double>{0.0, 0.002} : std::vector<double>{prm.td}) {
+            ParametricParams q = prm;
+            q.c7 = c7 * (1.0 + c6), q.c9 = c9 * (1.0 + c6), q.c6 = c6, q.td = td, q.c8 = 0.0, q.cg = 0.2;
+            if (fit_volume) q.c5 = -1.4 * c6;  // physical ratio c5 / c6 = -kappa (README)
+            cands.emplace_back(segmentCost(random, q, segment), q);
+          }
+    cands.emplace_back(segmentCost(random, prm, segment), prm);
+    std::sort(cands.begin(), cands.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    double best = 1e300;
+    ParametricParams best_q = prm;
+    for (std::size_t c = 0; c < std::min<std::size_t>(3, cands.size()); ++c) {
+      const ParametricParams start = cands[c].second;
+      auto res = [&](const Eigen::VectorXd& x, Eigen::VectorXd& r) {
+        ParametricParams q = unpack(x, false);
+        q.c2 = start.c2, q.c3 = start.c3, q.c4 = start.c4;
+        segmentResiduals(random, q, segment, r);
+      };
+      const LmResult lm = levenbergMarquardt(res, pack(start, false), 40);
+      if (lm.cost < best) best = lm.cost, best_q = unpack(lm.x, false);
+    }
+    prm = best_q;
+  }
   for (bool all : {false, true}) {
     auto res = [&](const Eigen::VectorXd& x, Eigen::VectorXd& r) { segmentResiduals(random, unpack(x, all), segment, r); };
     const LmResult lm = levenbergMarquardt(res, pack(prm, all), 80);
     prm = unpack(lm.x, all);
     rep.segment_rmse = std::sqrt(2.0 * lm.cost / std::max<Eigen::Index>(1, ((random.size() - 1) / segment) * segment)) * 1e3;
   }
+  // (c) Longer open-loop segments: the 2 s criterion punishes slow drift that 100 ms
+  // segments hardly see (leak, volume terms).
+  if (opt.long_segment > segment && static_cast<std::size_t>(opt.long_segment) < random.size()) {
+    auto res = [&](const Eigen::VectorXd& x, Eigen::VectorXd& r) {
+      segmentResiduals(random, unpack(x, true), opt.long_segment, r);
+    };
+    const LmResult lm = levenbergMarquardt(res, pack(prm, true), 60);
+    prm = unpack(lm.x, true);
+  }
+  if (tie_c5) prm.c5 = -constants::kKappa * prm.c6;
   prm.validate();
   rep.params = prm;
   return rep;
@@ -222,7 +296,7 @@ PredictionReport predictionRmse(const Recording& rec, const ParametricModel& mod
   for (std::size_t start = 0; start + len < rec.size(); start += len) {
     double p = rec.pressure[start];
     for (std::size_t k = start; k < start + len; ++k) {
-      p = model.step(p, rec.volts[k], rec.dt, rec.inputs(k));
+      p = model.stepDelayed(p, rec.volts[k > 0 ? k - 1 : 0], rec.volts[k], rec.dt, rec.inputs(k));
       const double e = p - rec.pressure[k + 1];
       sq += e * e;
       supply += rec.supply[k];

@@ -77,3 +77,19 @@ TEST(FastExp, MatchesStdExp) {
   EXPECT_EQ(fastExp(-800), 0.0);
   EXPECT_TRUE(std::isinf(fastExp(800)));
 }
+
+TEST(Gompertz, TableMatchesExactCurve) {
+  // The plant evaluates areas from GompertzTable: offset + a H_b(c (u + d)).
+  for (int v : {1, 2}) {
+    const ValveParams p = valveParams(v);
+    for (const GompertzArea& g : {p.inlet, p.exhaust}) {
+      const GompertzTable& t = gompertzTable(g.b);
+      EXPECT_EQ(&t, &gompertzTable(g.b));  // shared
+      for (double u = -6.0; u <= 6.0; u += 0.0137) {
+        const double exact = g.offset + g.a * std::exp(-g.b * std::exp(-g.c * (u + g.d)));
+        EXPECT_NEAR(g.offset + g.a * t(g.c * (u + g.d)), exact, 1e-5 * g.a) << v << " " << u;
+      }
+    }
+  }
+  EXPECT_THROW(GompertzTable(0.0), std::invalid_argument);
+}

@@ -99,3 +99,33 @@ TEST(ParamsIo, RoundTripAndMalformedFieldNamed) {
   EXPECT_NE(message("parametric:\n  default: {c2: 0, c3: 1, c4: 0, c5: 0, c6: 0, c7: 1, c8: 0, c9: -1, cg: 0.1}\n").find("c9"),
             std::string::npos);
 }
+
+TEST(Parametric, DeadTimeStep) {
+  ParametricParams prm = sample();
+  const ParametricModel plain(prm);
+  prm.td = 0.002;
+  const ParametricModel delayed(prm);
+  const double p = 250e3, w = -1.0, u = 1.2, dt = 0.005;
+  // td = 0: the previous command has no effect.
+  EXPECT_EQ(plain.stepDelayed(p, w, u, dt, inputs()), plain.step(p, u, dt, inputs()));
+  // td = 2 ms: w for 2 ms, then u for 3 ms (two exact steps).
+  const double expected = plain.step(plain.step(p, w, 0.002, inputs()), u, 0.003, inputs());
+  EXPECT_NEAR(delayed.stepDelayed(p, w, u, dt, inputs()), expected, 1e-6);
+  // Derivatives against central differences.
+  double dp, dw, du;
+  delayed.stepDelayed(p, w, u, dt, inputs(), &dp, &dw, &du);
+  const double h = 1e-4, hp = 1.0;
+  EXPECT_NEAR(dp, (delayed.stepDelayed(p + hp, w, u, dt, inputs()) - delayed.stepDelayed(p - hp, w, u, dt, inputs())) / (2 * hp), 1e-6);
+  const double fd_w = (delayed.stepDelayed(p, w + h, u, dt, inputs()) - delayed.stepDelayed(p, w - h, u, dt, inputs())) / (2 * h);
+  const double fd_u = (delayed.stepDelayed(p, w, u + h, dt, inputs()) - delayed.stepDelayed(p, w, u - h, dt, inputs())) / (2 * h);
+  EXPECT_NEAR(dw, fd_w, 1e-4 * std::abs(fd_w) + 1e-2);
+  EXPECT_NEAR(du, fd_u, 1e-4 * std::abs(fd_u) + 1e-2);
+  // Dead time in the YAML: optional on input (0 when absent), written on output.
+  ParameterSet set;
+  set.defaults = prm;
+  EXPECT_DOUBLE_EQ(parseParameterSet(formatParameterSet(set)).defaults.td, 0.002);
+  const std::string old = "parametric:\n  default: {c2: 0, c3: 2, c4: 0.5, c5: 0, c6: 0, c7: 80, c8: 0.2, c9: 10, cg: 0.3}\n";
+  EXPECT_DOUBLE_EQ(parseParameterSet(old).defaults.td, 0.0);
+  prm.td = -0.001;
+  EXPECT_THROW(ParametricModel{prm}, std::invalid_argument);
+}

@@ -57,6 +57,11 @@ TEST(Catalogue, KnownTypesAndUnknownNamed) {
   EXPECT_NEAR(689476.0 * m9.bore_area, 42.0, 2.0);
   EXPECT_GT(cylinderSpec("M16").bore_area, m9.bore_area);
   EXPECT_GT(cylinderSpec("M24").bore_area, cylinderSpec("M16").bore_area);
+  // M40: 40 mm bore, 100 mm stroke (arm shoulder/elbow).
+  const CylinderSpec m40 = cylinderSpec("M40");
+  EXPECT_NEAR(m40.bore_area, M_PI / 4 * 0.040 * 0.040, 1e-12);
+  EXPECT_DOUBLE_EQ(m40.stroke, 0.100);
+  EXPECT_GT(m40.dead_volume, cylinderSpec("M24").dead_volume);
   try {
     cylinderSpec("M99");
     FAIL() << "no throw";

@@ -70,11 +70,15 @@ class FlowTable {
     const int i = x < kSegments - 1 ? static_cast<int>(x) : kSegments - 1;
     const double t = x - i;
     *dg = dg_[i];
+    // g itself is smooth away from r = 1: interpolate it directly (no sqrt); only the
+    // last kEdge segments, next to the square-root edge, interpolate h.
+    if (i < kSegments - kEdge) return g_[i] + (g_[i + 1] - g_[i]) * t;
     return alpha_ * std::sqrt(h_[i] + (h_[i + 1] - h_[i]) * t);
   }
 
  private:
   static constexpr int kSegments = 512;
+  static constexpr int kEdge = 16;
   // h = (g / alpha)^2 is smooth near r = 1 where g has a square-root edge, so h is what
   // gets interpolated.
   // dg_ is g' at each segment's midpoint: g' = alpha h' / (2 sqrt h) is unbounded at r = 1,
@@ -82,6 +86,7 @@ class FlowTable {
   // secant), so a per-segment constant is enough.
   double r_choke_ = 0, inv_step_ = 0, alpha_ = 0, beta_ = 0;
   std::array<double, kSegments + 2> h_{};
+  std::array<double, kSegments + 2> g_{};
   std::array<double, kSegments + 1> dg_{};
 };
 
@@ -101,6 +106,32 @@ struct GompertzArea {
     return offset + a * fastExp(-inner);
   }
 };
+
+// The Gompertz shape H(x) = exp(-b exp(-x)) of one b, tabulated on a uniform grid in
+// x = c (u + d) with linear interpolation, for the plant's inner loop (the exact form costs
+// two nested exponentials per port and command change). Absolute error of H below 1e-5
+// (so of the area below 1e-5 a; tested against GompertzArea).
+class GompertzTable {
+ public:
+  explicit GompertzTable(double b);
+  double b() const { return b_; }
+  double operator()(double x) const {
+    if (!(x > x_lo_)) return 0.0;  // H < 1e-17 below the grid
+    if (x >= x_hi_) return 1.0;    // 1 - H < 1e-7 above the grid
+    const double s = (x - x_lo_) * inv_step_;
+    const int i = static_cast<int>(s);
+    const double t = s - i;
+    return h_[i] + (h_[i + 1] - h_[i]) * t;
+  }
+
+ private:
+  static constexpr int kSegments = 4096;
+  double b_ = 0, x_lo_ = 0, x_hi_ = 0, inv_step_ = 0;
+  std::array<double, kSegments + 2> h_{};
+};
+
+// Shared table for a given b (built once per distinct b, thread-safe).
+const GompertzTable& gompertzTable(double b);
 
 struct ValveParams {
   GompertzArea inlet;    // supply -> chamber

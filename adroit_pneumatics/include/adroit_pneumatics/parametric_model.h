@@ -22,6 +22,8 @@ struct ParametricParams {
   double c8 = 0.0;    // asymmetry of the rate between inlet and exhaust
   double c9 = 20.0;   // 1/s, rate at the centre
   double cg = 0.2;    // V, smoothing of |uh|
+  double td = 0.0;    // s, input dead time (tube transport delay, fig. 3.8), in [0, 0.05]:
+                      // a command acts td after it is issued (stepDelayed)
   // Throws std::invalid_argument naming the first bad field (non-finite, cg <= 0,
   // c9 <= 0, or |c8| >= 1 which would let the rate go negative).
   void validate() const;
@@ -48,6 +50,12 @@ class ParametricModel {
   // result wrt the start pressure and the command (used by iLQG).
   double step(double p, double u, double dt, const ParametricInputs& in, double* dp_dp = nullptr,
               double* dp_du = nullptr) const;
+
+  // Step of dt in which the previous command w still acts for the first min(td, dt) (the
+  // dead time of the tube) and u for the rest; exact for piecewise-constant commands when
+  // td <= dt. With td = 0 it equals step(p, u, ...). Optional derivatives wrt p, w, u.
+  double stepDelayed(double p, double w, double u, double dt, const ParametricInputs& in, double* dp_dp = nullptr,
+                     double* dp_dw = nullptr, double* dp_du = nullptr) const;
 
   // Command whose steady state is p_des (Newton on the monotone s(u)), clamped to
   // [u_min, u_max]; targets outside the reachable range give the nearer limit.

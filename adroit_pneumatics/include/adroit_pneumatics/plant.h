@@ -14,7 +14,7 @@ namespace adroit::pneumatics {
 
 // One single-acting cylinder (front chamber driven, rear chamber open) with its valve.
 struct CylinderSpec {
-  std::string type;            // catalogue name ("M9", "M16", "M24")
+  std::string type;            // catalogue name ("M9", "M16", "M24", "M40")
   double bore_diameter = 0;    // m
   double bore_area = 0;        // m^2
   double stroke = 0;           // m
@@ -24,9 +24,10 @@ struct CylinderSpec {
   double swept_volume() const { return bore_area * stroke; }
 };
 
-// Catalogue: "M9" (AIRPEL M9D37.5, fingers), "M16" (AIRPEL M16, wrist), "M24" (arm).
+// Catalogue: "M9" (AIRPEL M9D37.5, fingers), "M16" (AIRPEL M16, wrist), "M24" (arm),
+// "M40" (arm shoulder/elbow, 40 mm bore, 100 mm stroke).
 // Unknown type -> std::invalid_argument naming it. Values and their sources are in the
-// README (table 4.3, section 4.5, 3.5.1); M24 values are documented assumptions.
+// README (table 4.3, section 4.5, 3.5.1); M24 and M40 values are documented assumptions.
 CylinderSpec cylinderSpec(const std::string& type);
 
 // Shared supply (section 4.3.6): a first-order lag towards
@@ -114,7 +115,19 @@ class PneumaticPlant {
   const PlantOptions& options() const { return options_; }
 
  private:
-  void updateAreas(std::size_t i, double volts);
+  void updateAreas(std::size_t i, double volts) {
+    if (volts == applied_volts_[i]) return;  // areas depend only on the command
+    applied_volts_[i] = volts;
+    inlet_area_[i] = fast_inlet_[i](volts);
+    outlet_area_[i] = fast_exhaust_[i](volts) + specs_[i].leak_area;
+  }
+
+  // One port in the tabulated form area = offset + a H_b(c u + c d).
+  struct FastPort {
+    double offset = 0, a = 0, c = 0, cd = 0;
+    const GompertzTable* table = nullptr;
+    double operator()(double volts) const { return offset + a * (*table)(c * volts + cd); }
+  };
 
   std::vector<CylinderSpec> specs_;
   SupplyParams supply_params_;
@@ -129,6 +142,15 @@ class PneumaticPlant {
   // Derived caches (not state): command acting now and its port areas.
   std::vector<double> applied_volts_, inlet_area_, outlet_area_;
   std::vector<double> last_volts_;
+  std::vector<FastPort> fast_inlet_, fast_exhaust_;
+  // Scratch of the batched integrator (not state).
+  struct Work {
+    std::vector<ChamberInputs> in;
+    std::vector<double> gain, volume_term, f0, j0, q0, p1, f1, p2, f2;
+    std::vector<std::size_t> stiff;
+    void resize(std::size_t n);
+  };
+  Work work_;
 };
 
 }  // namespace adroit::pneumatics

@@ -15,6 +15,12 @@ class ScalarDynamics {
  public:
   virtual ~ScalarDynamics() = default;
   virtual double step(double p, double u, double* dp, double* du) const = 0;
+  // Step that may also depend on the previous command w (input dead time: w still acts at
+  // the start of the step). Default: no dependence on w.
+  virtual double stepWithMemory(double p, double /*w*/, double u, double* dp, double* dw, double* du) const {
+    if (dw) *dw = 0.0;
+    return step(p, u, dp, du);
+  }
 };
 
 struct IlqgParams {
@@ -25,8 +31,23 @@ struct IlqgParams {
   double alpha_w = 1e-4;
   double u_min = -2.0;          // V, about 40 % of the valve range (5.6.3 item 4)
   double u_max = 2.0;
-  int iterations = 2;           // per solve (MPC: a few iterations per control period)
+  int iterations = 1;           // per solve: one iLQG iteration per control period from the
+                                // time-shifted warm start (real-time iteration; the thesis
+                                // takes "a few" per estimate update, 5.5.4)
   double feedback_fraction = 0.2;  // partial feedback (5.6.3 item 5)
+  // Offset-free MPC (IlqgPressureController): gain of the disturbance estimate, a constant
+  // pressure-rate bias d (Pa/s) added to the model, updated each tick from the one-step
+  // prediction error e as d += disturbance_gain * e / dt. 0 turns it off.
+  double disturbance_gain = 0.15;
+  double disturbance_limit = 20e6;  // Pa/s, |d| bound (a sane model is off by far less)
+  // Start pressure of each solve: pred + measurement_gain (p_meas - pred), pred = the model's
+  // one-step prediction (with d) from the last tick. 1 = the raw measurement; smaller
+  // filters sensor noise without the lag of a plain low-pass (the model carries the motion).
+  double measurement_gain = 0.25;
+  // u_des of eq. 5.12: false (default) = the previous plan shifted in time (alpha_u is then a
+  // pure proximal regulariser that cannot bias the steady state), true = the model's
+  // steady-state inverse of the reference (biased whenever the model is).
+  bool u_des_steady_state = false;
   void validate() const;        // throws std::invalid_argument naming the field
 };
 
@@ -52,6 +73,7 @@ class IlqgSolver {
   const std::vector<double>& u() const { return u_; }
   const std::vector<double>& p() const { return p_; }
   const std::vector<double>& w() const { return w_; }
+  // Feedback gains of the last successful backward pass (the one that produced u()).
   const std::vector<double>& gainP() const { return kp_; }
   const std::vector<double>& gainW() const { return kw_; }
   double cost() const { return cost_; }
@@ -63,7 +85,7 @@ class IlqgSolver {
   bool backward(const double* p_ref, const double* u_des, double reg, double* expected);
 
   IlqgParams params_;
-  std::vector<double> p_, w_, u_, a_, b_, kff_, kp_, kw_;
+  std::vector<double> p_, w_, u_, a_, b_, c_, kff_, kp_, kw_;
   std::vector<double> p_try_, w_try_, u_try_;
   double cost_ = 0;
 };
@@ -96,14 +118,22 @@ class IlqgPressureController : public PressureController {
   const Policy& policy() const { return policy_; }
   // Policy evaluated at time t and state; NaN if no valid policy covers t.
   double evaluate(double t, double p_meas, double w_last) const;
+  // Current disturbance estimate (Pa/s).
+  double disturbance() const { return disturbance_; }
 
  private:
+  void updateDisturbance(double t, double p_meas, double w_last, const ParametricInputs& in);
+
   ParametricModel model_;
   IlqgSolver solver_;
   int solve_every_;
   int tick_ = 0;
   Policy policy_;
   std::vector<double> p_ref_mpa_, u_des_, warm_;
+  // Offset-free estimator memory: last tick's time, measurement, commands and inputs.
+  bool have_last_ = false;
+  double last_t_ = 0, last_p_ = 0, last_w_ = 0, last_u_ = 0, disturbance_ = 0, p_est_ = 0;
+  ParametricInputs last_in_;
 };
 
 struct PidfParams {

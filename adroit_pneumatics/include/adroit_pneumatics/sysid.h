@@ -47,9 +47,22 @@ struct FitReport {
   double segment_rmse = 0;      // Pa, multi-step fit
 };
 
-// (a) Steady state from a slow sweep: c2, c3, c4. (b) Rate from low-passed random commands:
-// c7, c8, c9, cg (+ c5, c6 if fit_volume), by multi-step simulation error over segments of
-// `segment` samples, then all parameters jointly.
+struct FitOptions {
+  bool fit_volume = false;     // c5, c6 (volume rate and volume-dependent tau)
+  bool fit_dead_time = true;   // td, the input dead time (tube delay)
+  int segment = 20;            // samples per open-loop segment, first stages
+  int long_segment = 100;      // final joint stage: longer open-loop segments (closer to the
+                               // 2 s prediction criterion); <= segment skips it
+  bool multi_start = true;     // several starting points for the steady state and the rate
+};
+
+// (a) Steady state from a slow sweep: c2, c3, c4 (multi-start). (b) Rate from low-passed
+// random commands: c7, c8, c9, cg (+ c5, c6 if fit_volume, + td if fit_dead_time), by
+// multi-step simulation error over segments of `segment` samples (multi-start), then all
+// parameters jointly, then all jointly on segments of `long_segment` samples.
+FitReport fitParametricModel(const Recording& sweep, const Recording& random, const FitOptions& options,
+                             const ParametricParams& initial = {});
+// Older form: FitOptions with fit_volume and segment as given.
 FitReport fitParametricModel(const Recording& sweep, const Recording& random, bool fit_volume,
                              int segment = 20, const ParametricParams& initial = {});
 
@@ -59,7 +72,8 @@ struct PredictionReport {
   int windows = 0;
 };
 
-// Open-loop prediction from the measured pressure at each window start.
+// Open-loop prediction from the measured pressure at each window start (the model's dead
+// time applies the previous sample's command for the first td of each sample).
 PredictionReport predictionRmse(const Recording& rec, const ParametricModel& model, double window = 2.0);
 
 }  // namespace adroit::pneumatics

@@ -1,0 +1,47 @@
+# ROS layer of adroit_pneumatics: the ROS-free pool library, the pool node and nodelet,
+# the excitation node, the rosbag -> CSV tool for identification, and their tests.
+# Included at the end of CMakeLists.txt (after catkin_package and the core target).
+
+find_package(catkin REQUIRED COMPONENTS
+  adroit_core adroit_description adroit_msgs roscpp roslib nodelet pluginlib diagnostic_msgs rosbag std_msgs)
+
+# ROS-free: CylinderPool, default pool split, model cylinder table.
+add_library(adroit_pneumatics_pool src/pool.cpp)
+target_include_directories(adroit_pneumatics_pool PUBLIC include ${catkin_INCLUDE_DIRS})
+target_link_libraries(adroit_pneumatics_pool PUBLIC adroit_pneumatics_core ${catkin_LIBRARIES})
+
+# One ROS wrapper class (pool_ros.cpp) behind both the nodelet plugin and the node.
+add_library(adroit_pneumatics_nodelets nodes/pool_ros.cpp nodes/pool_nodelet.cpp)
+target_link_libraries(adroit_pneumatics_nodelets adroit_pneumatics_pool ${catkin_LIBRARIES})
+add_dependencies(adroit_pneumatics_nodelets ${catkin_EXPORTED_TARGETS})
+
+add_executable(pool_node nodes/pool_node.cpp)
+target_link_libraries(pool_node adroit_pneumatics_nodelets ${catkin_LIBRARIES})
+
+add_executable(excitation_node nodes/excitation_node.cpp)
+target_link_libraries(excitation_node adroit_pneumatics_pool ${catkin_LIBRARIES})
+add_dependencies(excitation_node ${catkin_EXPORTED_TARGETS})
+
+add_executable(pneumatic_sysid_bag nodes/sysid_bag.cpp)
+target_link_libraries(pneumatic_sysid_bag adroit_pneumatics_pool ${catkin_LIBRARIES})
+add_dependencies(pneumatic_sysid_bag ${catkin_EXPORTED_TARGETS})
+
+install(TARGETS adroit_pneumatics_pool adroit_pneumatics_nodelets
+  ARCHIVE DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
+  LIBRARY DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION})
+install(TARGETS pool_node excitation_node pneumatic_sysid_bag
+  RUNTIME DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
+install(FILES nodelet_plugins.xml DESTINATION ${CATKIN_PACKAGE_SHARE_DESTINATION})
+install(DIRECTORY launch DESTINATION ${CATKIN_PACKAGE_SHARE_DESTINATION})
+catkin_install_python(PROGRAMS test/pool_rostest.py DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
+
+if(CATKIN_ENABLE_TESTING)
+  catkin_add_gtest(test_pool test/test_pool.cpp)
+  target_link_libraries(test_pool adroit_pneumatics_pool GTest::gtest_main)
+  # The generated scenes of adroit_description (for the default split on the real model).
+  target_compile_definitions(test_pool PRIVATE ADROIT_DESCRIPTION_SHARE="${adroit_description_DIR}/..")
+
+  find_package(rostest REQUIRED)
+  add_rostest(test/pool.test DEPENDENCIES pool_node)
+  add_rostest(test/pool_nodelet.test DEPENDENCIES adroit_pneumatics_nodelets)
+endif()

@@ -1,0 +1,260 @@
+#!/usr/bin/python3
+"""Integration test of pool_node (or the pool nodelet) against a real roscore.
+
+The test node plays the driver: it publishes /adroit/actuator_states at 200 Hz from a
+first-order pressure response to the valve commands the pool sends (so the loop closes)
+and force references as the behaviour MPC would. It checks that the pool commands exactly
+its cylinders at 200 Hz with finite values in [-5, 5], tracks the reference, rejects bad
+references (counted in /adroit/diagnostics) while it keeps commanding from the last valid
+plan, exhausts after the reference timeout, and that a bad configuration stops the node
+with one line naming the field.
+"""
+import math
+import os
+import subprocess
+import tempfile
+import threading
+import time
+import unittest
+
+import rospy
+import rostest
+from adroit_msgs.msg import ActuatorStates, ForceReference, ValveCommand
+from diagnostic_msgs.msg import DiagnosticArray
+
+ATM = 101325.0
+SUPPLY = 620e3
+EXHAUST = -5.0
+RATE = 200.0
+
+
+class FirstOrderPlant:
+    """Chamber pressure relaxing to a command-dependent level (the shape of thesis eq. 5.7:
+    sigmoid steady state between room and supply, rate growing with |u|)."""
+
+    def __init__(self, n):
+        self.p = [ATM] * n
+        self.u = [EXHAUST] * n
+
+    def step(self, dt):
+        cb, cs = (SUPPLY + ATM) / 2, (SUPPLY - ATM) / 2
+        for i, u in enumerate(self.u):
+            z = 2.0 * u + 0.5 * u ** 3
+            target = cb + cs * z / math.sqrt(1 + z * z)
+            rate = 20.0 + 80.0 * abs(u)
+            self.p[i] = target + (self.p[i] - target) * math.exp(-rate * dt)
+
+
+class PoolTest(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        cls.pool = rospy.get_param("~pool")
+        cls.bores = [math.pi * d * d / 4 for d in rospy.get_param("~bore_diameter")]
+        cls.timeout = rospy.get_param("~reference_timeout")
+        # Cylinders of other pools: their states (NaN!) and references must not disturb this pool.
+        cls.others = ["A_MFJ2_flex", "A_THJ1_ext"]
+        cls.lock = threading.Lock()
+        cls.plant = FirstOrderPlant(len(cls.pool))
+        cls.commands = []  # (receipt time, msg)
+        cls.diagnostics = []
+        cls.state_pub = rospy.Publisher("/adroit/actuator_states", ActuatorStates, queue_size=10, tcp_nodelay=True)
+        cls.ref_pub = rospy.Publisher("/adroit/force_reference", ForceReference, queue_size=10)
+        rospy.Subscriber("/adroit/valve_command", ValveCommand, cls.on_command, tcp_nodelay=True)
+        rospy.Subscriber("/adroit/diagnostics", DiagnosticArray, cls.on_diagnostics)
+        cls.running = True
+        cls.thread = threading.Thread(target=cls.driver_loop, daemon=True)
+        cls.thread.start()
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.running = False
+        cls.thread.join(2.0)
+
+    @classmethod
+    def on_command(cls, msg):
+        with cls.lock:
+            cls.commands.append((time.monotonic(), msg))
+            for name, v in zip(msg.name, msg.volts):
+                if name in cls.pool and math.isfinite(v):
+                    cls.plant.u[cls.pool.index(name)] = max(-5.0, min(5.0, v))
+
+    @classmethod
+    def on_diagnostics(cls, msg):
+        with cls.lock:
+            cls.diagnostics.extend(msg.status)
+
+    @classmethod
+    def driver_loop(cls):
+        rate = rospy.Rate(RATE)
+        last = time.monotonic()
+        while cls.running and not rospy.is_shutdown():
+            now = time.monotonic()
+            with cls.lock:
+                cls.plant.step(now - last)
+                p = list(cls.plant.p)
+            last = now
+            msg = ActuatorStates()
+            msg.header.stamp = rospy.Time.now()
+            msg.name = cls.pool + cls.others
+            n = len(msg.name)
+            msg.pressure = p + [float("nan")] * len(cls.others)
+            msg.length = [0.01] * n
+            msg.length_rate = [0.0] * n
+            msg.force = [0.0] * n
+            msg.command = [0.0] * n
+            msg.supply_pressure = SUPPLY
+            cls.state_pub.publish(msg)
+            try:
+                rate.sleep()
+            except rospy.ROSInterruptException:
+                return
+
+    # --- helpers -------------------------------------------------------------------------
+    def reference(self, forces, steps=20, dt=0.01, names=None, flat=None):
+        names = names if names is not None else self.pool + self.others
+        msg = ForceReference()
+        msg.header.stamp = rospy.Time.now()
+        msg.dt = dt
+        msg.steps = steps
+        msg.name = names
+        msg.force = flat if flat is not None else [forces[j] for _ in range(steps) for j in range(len(names))]
+        self.ref_pub.publish(msg)
+
+    def commands_between(self, t0, t1):
+        with self.lock:
+            return [m for (t, m) in self.commands if t0 <= t <= t1]
+
+    def latest_status(self):
+        name = rospy.get_param("~pool_name", "/pool_test")
+        with self.lock:
+            mine = [s for s in self.diagnostics if s.name == name]
+        return mine[-1] if mine else None
+
+    def wait_for(self, predicate, timeout, what):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if predicate():
+                return
+            time.sleep(0.02)
+        self.fail("timed out waiting for " + what)
+
+    # --- the test ------------------------------------------------------------------------
+    def test_1_reference_to_valve_commands(self):
+        self.wait_for(lambda: len(self.commands_between(0, 1e18)) > 0, 30.0, "the first valve command")
+        # Before any reference the pool vents its cylinders.
+        time.sleep(0.2)
+        first = self.commands_between(0, 1e18)[-1]
+        self.assertEqual(list(first.volts), [EXHAUST] * len(self.pool))
+
+        # Constant force references, refreshed at 20 Hz as the MPC would.
+        forces_pool = [8.0, 4.0, 60.0]  # N: about 126 / 63 / 48 kPa gauge
+        forces = forces_pool + [5.0] * len(self.others)
+        start = time.monotonic()
+        while time.monotonic() - start < 3.0:
+            self.reference(forces)
+            time.sleep(0.05)
+        t_end = time.monotonic()
+        window = self.commands_between(start + 1.0, t_end)
+
+        # Rate from the publication stamps over ~2 s.
+        stamps = [m.header.stamp.to_sec() for m in window]
+        rate = (len(stamps) - 1) / (stamps[-1] - stamps[0])
+        rospy.loginfo("valve command rate %.2f Hz over %d messages", rate, len(stamps))
+        self.assertAlmostEqual(rate, RATE, delta=0.05 * RATE)
+        gaps = [b - a for a, b in zip(stamps, stamps[1:])]
+        self.assertLess(max(gaps), 5 * 1.0 / RATE, "a gap of more than 5 periods")
+
+        for m in window:
+            self.assertEqual(sorted(m.name), sorted(self.pool))
+            self.assertEqual(len(m.name), len(self.pool))
+            self.assertEqual(len(m.index), 0)
+            self.assertEqual(len(m.volts), len(self.pool))
+            for v in m.volts:
+                self.assertTrue(math.isfinite(v))
+                self.assertGreaterEqual(v, -5.0)
+                self.assertLessEqual(v, 5.0)
+        # Tracking (exhaust would be -5): commands within the controller's +-2 V box.
+        for m in window[-50:]:
+            for v in m.volts:
+                self.assertGreaterEqual(v, -2.0)
+                self.assertLessEqual(v, 2.0)
+        # The loop closed: the simulated tendon forces are near the references.
+        with self.lock:
+            p = list(self.plant.p)
+        for name, pi, area, f in zip(self.pool, p, self.bores, forces_pool):
+            force = (pi - ATM) * area
+            rospy.loginfo("%s: force %.2f N for reference %.2f N", name, force, f)
+            self.assertAlmostEqual(force, f, delta=0.25 * f, msg=name)
+
+        # Bad references: NaN, wrong length, unknown name. The pool keeps its last plan.
+        t_bad = time.monotonic()
+        self.reference([float("nan")] + forces[1:])
+        self.reference(forces, flat=[1.0, 2.0, 3.0])
+        self.reference(forces[:3], names=["A_FFJ2_flex", "A_NOSUCH_flex", "A_ARJ1_flex"])
+        time.sleep(0.35)
+        kept = self.commands_between(t_bad + 0.05, t_bad + 0.3)
+        self.assertGreater(len(kept), 0.25 * RATE * 0.8)
+        for m in kept:
+            for v in m.volts:
+                self.assertTrue(-2.0 <= v <= 2.0, "pool dropped its plan before the timeout: %r" % (m.volts,))
+
+        # After the timeout (measured from the last valid reference) every cylinder exhausts.
+        time.sleep(self.timeout + 0.3)
+        after = self.commands_between(t_bad + self.timeout + 0.2, time.monotonic())
+        self.assertGreater(len(after), 0.2 * RATE * 0.8)
+        for m in after:
+            self.assertEqual(list(m.volts), [EXHAUST] * len(self.pool))
+
+        # Diagnostics count the rejections by reason and report the timings.
+        def counted():
+            s = self.latest_status()
+            if s is None:
+                return False
+            kv = {x.key: x.value for x in s.values}
+            return int(kv.get("references_rejected", "0")) >= 3
+        self.wait_for(counted, 3.0, "diagnostics with the rejections")
+        kv = {x.key: x.value for x in self.latest_status().values}
+        self.assertEqual(kv["references_rejected_non_finite"], "1")
+        self.assertEqual(kv["references_rejected_length"], "1")
+        self.assertEqual(kv["references_rejected_unknown_name"], "1")
+        self.assertEqual(kv["nonfinite_commands"], "0")
+        for key in ("solve_time", "policy_lag", "tracking_rmse_N", "publish_rate_hz"):
+            self.assertIn(key, kv)
+        rospy.loginfo("diagnostics: %s", kv)
+
+    def test_2_bad_configuration_stops_the_node(self):
+        if not rospy.get_param("~check_bad_config", False):
+            self.skipTest("checked by pool.test")
+        bad_yaml = tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False)
+        bad_yaml.write("parametric:\n  default: {c2: 0.0, c3: 2.0, c4: 0.5, c5: 0, c6: 0, c8: 0.2, c9: 10, cg: 0.3}\n")
+        bad_yaml.close()
+        # Private parameters go through the parameter server (roscpp's _name:=value cannot
+        # express lists).
+        cases = [
+            ({"cylinders": ["A_FFJ2_flex"], "params_file": bad_yaml.name}, "parametric.default.c7"),
+            ({"cylinders": ["A_FFJ2_flex", "A_NOSUCH_ext"]}, "A_NOSUCH_ext"),
+            ({"cylinders": ["A_FFJ2_flex"], "controller": "mpc"}, "controller"),
+            ({"pool": 9}, "pool"),
+            ({"cylinders": ["A_FFJ2_flex"], "ilqg": {"horizon": 0}}, "horizon"),
+            ({"cylinders": ["A_FFJ2_flex"], "reference_timout": 1.0}, "reference_timout"),
+        ]
+        try:
+            for i, (params, field) in enumerate(cases):
+                name = "bad_pool_%d" % i
+                for key, value in params.items():
+                    rospy.set_param("/%s/%s" % (name, key), value)
+                proc = subprocess.run(["rosrun", "adroit_pneumatics", "pool_node", "__name:=" + name],
+                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, timeout=30)
+                self.assertNotEqual(proc.returncode, 0, params)
+                lines = [l for l in (proc.stdout + proc.stderr).splitlines() if "FATAL" in l]
+                self.assertEqual(len(lines), 1, proc.stdout + proc.stderr)
+                self.assertIn(field, lines[0])
+                self.assertIn("bad parameter", lines[0])
+                rospy.loginfo("%s", lines[0])
+        finally:
+            os.unlink(bad_yaml.name)
+
+
+if __name__ == "__main__":
+    rospy.init_node("pool_rostest")
+    rostest.rosrun("adroit_pneumatics", "pool_rostest", PoolTest)

@@ -1,0 +1,170 @@
+// The simulated ADROIT robot, ROS-free: MuJoCo model/data, the pneumatic plant (one
+// cylinder per tendon actuator), the sensor pipeline and the safety state (command
+// watchdog, e-stop latch, fault latch, rejected-command counters).
+//
+// Time: clock() is monotonic (steps x timestep since construction). Resets and state
+// restores change the physics state and MuJoCo's own time, never clock(), so downstream
+// consumers never see time jump back.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "adroit_core/model_tables.h"
+#include "adroit_core/mujoco_model.h"
+#include "adroit_description/cylinders.h"
+#include "adroit_driver/command_check.h"
+#include "adroit_driver/sensor_pipeline.h"
+#include "adroit_driver/sim_config.h"
+#include "adroit_pneumatics/plant.h"
+
+namespace adroit::driver {
+
+// Everything needed to continue a simulation exactly: physics, pressures (with the plant's
+// tube-delay line), sensors (filters, delay lines, random generators) and the commands.
+// Safety state and clock() are deliberately not part of it: restoring a state must not
+// clear an e-stop, and time never goes back.
+struct SimState {
+  // Complete copy of MuJoCo's data: restoring it replays bit for bit (MuJoCo carries
+  // solver and integrator intermediates between steps that the arrays below do not hold).
+  std::shared_ptr<const mjData> physics;
+  double physics_time = 0;
+  std::vector<double> qpos, qvel, act, qacc_warmstart;
+  pneumatics::PlantState plant;  // empty pressure vector in force mode
+  std::vector<double> command;   // volts (pneumatic) or newtons (force), per cylinder
+  SensorPipeline sensors;
+  double sensors_clock = 0;  // clock() when captured (the sensors' delay lines use it)
+};
+
+enum class SafeCause { kNone = 0, kEstop = 1, kWatchdog = 2, kFault = 4 };
+
+struct SafetyStatus {
+  bool safe_state = false;      // supply exhausted, every valve open to exhaust
+  bool estop_latched = false;
+  bool estop_input = false;     // the physical e-stop button is held
+  bool watchdog_latched = false;
+  bool fault_latched = false;
+  bool fault_persists = false;  // the last physics step faulted
+  bool watchdog_armed = false;  // a command has been received since start / release
+  std::string fault;            // description of the first latched fault
+};
+
+struct Counters {
+  std::uint64_t steps = 0;
+  std::uint64_t accepted = 0;
+  std::uint64_t clamped = 0;
+  std::uint64_t rejected_addressing = 0;  // both/neither, length mismatch, duplicates
+  std::uint64_t rejected_name = 0;        // unknown names, indices out of range
+  std::uint64_t rejected_not_finite = 0;
+  std::uint64_t rejected_range = 0;
+  std::uint64_t rejected_wrong_mode = 0;  // valve command in force mode or vice versa
+  std::uint64_t ignored_while_safe = 0;   // valid commands ignored while latched
+  std::uint64_t watchdog_trips = 0;
+  std::uint64_t estops = 0;
+  std::uint64_t faults = 0;               // physics steps refused (bad qpos/qvel/qacc/ctrl)
+  std::uint64_t rejected() const {
+    return rejected_addressing + rejected_name + rejected_not_finite + rejected_range + rejected_wrong_mode;
+  }
+};
+
+struct CommandResult {
+  CommandVerdict verdict = CommandVerdict::kEmpty;
+  bool applied = false;  // false when rejected or ignored while in the safe state
+  std::string error;
+};
+
+class SimulatedRobot {
+ public:
+  // Throws ModelLoadError (MuJoCo's message and the path) or std::invalid_argument.
+  explicit SimulatedRobot(const SimConfig& config);
+
+  // --- commands (addressing and validation: command_check.h) ---
+  CommandResult commandValves(const std::vector<std::string>& names, const std::vector<std::uint16_t>& indices,
+                              const std::vector<double>& volts);
+  CommandResult commandForces(const std::vector<std::string>& names, const std::vector<std::uint16_t>& indices,
+                              const std::vector<double>& newtons);
+
+  // --- one physics step (config.timestep) ---
+  void step();
+
+  // --- safety ---
+  void estop();                        // software e-stop: latch the safe state
+  void setEstopInput(bool held);       // the physical button; held latches the safe state
+  // Leaves the safe state unless a cause persists (input held, physics still faulting);
+  // on refusal returns false and says why.
+  bool release(std::string* why);
+  const SafetyStatus& safety() const { return safety_; }
+  const Counters& counters() const { return counters_; }
+
+  // --- state ---
+  SimState state() const;
+  // Throws std::invalid_argument when sizes do not match this model.
+  void setState(const SimState& state);
+  // Model default (keyframe 0 if present), or a named keyframe. Pressures atmospheric.
+  bool resetToKeyframe(const std::string& keyframe, std::string* error);
+  // Full state: empty qpos = model default, empty qvel = zeros, empty pressure = atmospheric.
+  bool resetToState(const std::vector<double>& qpos, const std::vector<double>& qvel,
+                    const std::vector<double>& pressure, std::string* error);
+  // World-frame pose (quaternion w x y z, normalised here) and velocity of the free object.
+  bool setObjectPose(const std::array<double, 3>& position, const std::array<double, 4>& quaternion,
+                     const std::array<double, 3>& linear, const std::array<double, 3>& angular, std::string* error);
+
+  // --- outputs ---
+  const Signals& sensed() const { return sensors_.sensed(); }
+  const Signals& truth() const { return truth_; }
+  const std::vector<double>& appliedCommand() const { return applied_command_; }  // volts or N
+
+  // --- model information ---
+  double clock() const { return clock_; }
+  double timestep() const { return config_.timestep; }
+  const SimConfig& config() const { return config_; }
+  const mjModel* model() const { return model_.get(); }
+  const mjData* data() const { return data_.get(); }
+  const std::vector<std::string>& jointNames() const { return joint_names_; }
+  const std::vector<std::string>& cylinderNames() const { return actuators_.names(); }
+  const std::vector<description::Cylinder>& cylinders() const { return cylinders_; }
+  const std::vector<std::string>& touchNames() const { return touch_names_; }
+  bool hasObject() const { return object_body_ >= 0; }
+  int objectBody() const { return object_body_; }
+  double atmosphericPressure() const { return description::kAtmosphericPressure; }
+  const pneumatics::PneumaticPlant* plant() const { return plant_.get(); }
+
+ private:
+  void enterSafeState(SafeCause cause);
+  void applyActuation();
+  bool physicsIsBad(std::string* what) const;
+  bool physicsStep();  // false when the step was refused as a fault
+  void computeTruth();
+  void afterTeleport();  // recompute derived data and restart the sensors
+  CommandResult acceptCommand(const CheckedCommand& checked);
+
+  SimConfig config_;
+  ModelPtr model_;
+  DataPtr data_;
+  NameIndex actuators_;
+  std::vector<description::Cylinder> cylinders_;
+  std::unique_ptr<pneumatics::PneumaticPlant> plant_;
+  ValueLimits valve_limits_, force_limits_;
+
+  std::vector<int> joint_ids_;  // 1-DOF joints reported in joint states
+  std::vector<std::string> joint_names_;
+  std::vector<int> touch_adr_;  // sensordata addresses of touch sensors
+  std::vector<std::string> touch_names_;
+  int object_body_ = -1, object_qpos_ = -1, object_dof_ = -1;
+
+  double clock_ = 0;
+  std::vector<double> command_;          // last accepted command per cylinder
+  std::vector<double> applied_command_;  // what acted in the last step (safe state applied)
+  std::vector<double> last_command_clock_;
+  std::vector<double> travel_, travel_rate_;
+  Signals truth_;
+  SensorPipeline sensors_;
+
+  SafetyStatus safety_;
+  Counters counters_;
+};
+
+}  // namespace adroit::driver

@@ -1,0 +1,22 @@
+// adroit_sim: the simulation driver as a stand-alone node.
+#include <ros/ros.h>
+
+#include <cstdio>
+
+#include "adroit_driver/sim_driver.h"
+
+int main(int argc, char** argv) {
+  ros::init(argc, argv, "adroit_sim");
+  std::unique_ptr<adroit::driver::SimDriver> driver;
+  try {
+    driver = std::make_unique<adroit::driver::SimDriver>(ros::NodeHandle(), ros::NodeHandle("~"));
+  } catch (const std::exception& e) {
+    // One line on stderr (rosconsole prints nothing before the node has started).
+    std::fprintf(stderr, "[FATAL] adroit_sim: %s\n", e.what());
+    return 1;
+  }
+  driver->start();
+  ros::spin();
+  driver->stop();
+  return 0;
+}

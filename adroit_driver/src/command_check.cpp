@@ -1,0 +1,79 @@
+#include "adroit_driver/command_check.h"
+
+#include <cmath>
+
+namespace adroit::driver {
+
+const char* verdictName(CommandVerdict v) {
+  switch (v) {
+    case CommandVerdict::kAccepted: return "accepted";
+    case CommandVerdict::kClamped: return "clamped";
+    case CommandVerdict::kBadAddressing: return "bad_addressing";
+    case CommandVerdict::kUnknownName: return "unknown_name";
+    case CommandVerdict::kIndexOutOfRange: return "index_out_of_range";
+    case CommandVerdict::kDuplicate: return "duplicate";
+    case CommandVerdict::kNotFinite: return "not_finite";
+    case CommandVerdict::kOutOfRange: return "out_of_range";
+    case CommandVerdict::kEmpty: return "empty";
+  }
+  return "?";
+}
+
+namespace {
+CheckedCommand fail(CommandVerdict v, std::string error) {
+  CheckedCommand c;
+  c.verdict = v;
+  c.error = std::move(error);
+  return c;
+}
+}  // namespace
+
+CheckedCommand checkCommand(const NameIndex& actuators, const std::vector<std::string>& names,
+                            const std::vector<std::uint16_t>& indices, const std::vector<double>& values,
+                            const ValueLimits& limits) {
+  if (values.empty() && names.empty() && indices.empty()) return fail(CommandVerdict::kEmpty, "empty command");
+  if (!names.empty() && !indices.empty())
+    return fail(CommandVerdict::kBadAddressing, "both name[] and index[] are set; use exactly one");
+  const std::size_t addressed = names.empty() ? indices.size() : names.size();
+  if (addressed != values.size())
+    return fail(CommandVerdict::kBadAddressing, "addresses " + std::to_string(addressed) + " actuators but carries " +
+                                                    std::to_string(values.size()) + " values");
+  CheckedCommand out;
+  out.actuator.reserve(values.size());
+  std::vector<char> seen(actuators.size(), 0);
+  for (std::size_t k = 0; k < values.size(); ++k) {
+    int a;
+    if (!names.empty()) {
+      const auto found = actuators.find(names[k]);
+      if (!found) return fail(CommandVerdict::kUnknownName, "unknown actuator '" + names[k] + "'");
+      a = *found;
+    } else {
+      a = indices[k];
+      if (a >= actuators.size())
+        return fail(CommandVerdict::kIndexOutOfRange, "actuator index " + std::to_string(a) + " out of range [0, " +
+                                                          std::to_string(actuators.size()) + ")");
+    }
+    if (seen[a]) return fail(CommandVerdict::kDuplicate, "actuator '" + actuators.name(a) + "' addressed twice");
+    seen[a] = 1;
+    out.actuator.push_back(a);
+  }
+  out.verdict = CommandVerdict::kAccepted;
+  out.value = values;
+  for (std::size_t k = 0; k < values.size(); ++k) {
+    const int a = out.actuator[k];
+    const double v = values[k];
+    if (!std::isfinite(v))
+      return fail(CommandVerdict::kNotFinite, "non-finite value for '" + actuators.name(a) + "'");
+    if (v < limits.lower[a] || (v > limits.upper[a] && !limits.clamp_above))
+      return fail(CommandVerdict::kOutOfRange, "value " + std::to_string(v) + " for '" + actuators.name(a) +
+                                                   "' outside [" + std::to_string(limits.lower[a]) + ", " +
+                                                   std::to_string(limits.upper[a]) + "]");
+    if (v > limits.upper[a]) {
+      out.value[k] = limits.upper[a];
+      out.verdict = CommandVerdict::kClamped;
+    }
+  }
+  return out;
+}
+
+}  // namespace adroit::driver

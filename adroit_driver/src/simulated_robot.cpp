@@ -1,0 +1,518 @@
+#include "adroit_driver/simulated_robot.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+namespace adroit::driver {
+
+namespace {
+constexpr double kNever = -std::numeric_limits<double>::infinity();
+constexpr double kExhaustVolts = -5.0;  // safe state: every valve fully open to exhaust
+constexpr double kIdleVolts = 0.0;      // valve centred: the command before any controller
+
+// Plant cylinder for a model cylinder: the catalogue entry of its type with the model's
+// bore and stroke. The plant catalogue has no M40 (arm shoulder/elbow): it is built from
+// the M24 with dead volume and leak orifice area scaled by the bore area, the way the
+// catalogue scales M16/M24 from the M9. It keeps the M24's valve: a 40 mm chamber near
+// full stroke therefore exhausts in ~0.5 s, not 200 ms (README, "Plant").
+pneumatics::CylinderSpec plantSpec(const description::Cylinder& c) {
+  const bool from_m24 = c.type == "M40";
+  pneumatics::CylinderSpec spec = pneumatics::cylinderSpec(from_m24 ? "M24" : c.type);
+  const double area_ratio = (c.bore_diameter * c.bore_diameter) / (spec.bore_diameter * spec.bore_diameter);
+  if (from_m24) {
+    spec.type = c.type;
+    spec.dead_volume *= area_ratio;
+    spec.leak_area *= area_ratio;
+  }
+  spec.bore_diameter = c.bore_diameter;
+  spec.bore_area = c.bore_area;
+  spec.stroke = c.stroke;
+  return spec;
+}
+
+std::string joinNames(const NameIndex& index) {
+  std::string out;
+  for (const auto& n : index.names()) out += (out.empty() ? "" : ", ") + n;
+  return out;
+}
+
+bool allFinite(const std::vector<double>& v) {
+  return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x); });
+}
+
+// The full copy is used only while the editable arrays still describe it: a caller that
+// changed qpos/qvel/... in a SimState gets what it asked for.
+bool physicsCopyMatches(const mjModel* m, const SimState& s) {
+  const mjData* c = s.physics.get();
+  return c && c->time == s.physics_time && std::equal(s.qpos.begin(), s.qpos.end(), c->qpos) &&
+         std::equal(s.qvel.begin(), s.qvel.end(), c->qvel) && std::equal(s.act.begin(), s.act.end(), c->act) &&
+         std::equal(s.qacc_warmstart.begin(), s.qacc_warmstart.end(), c->qacc_warmstart) &&
+         static_cast<int>(s.qpos.size()) == m->nq;
+}
+
+}  // namespace
+
+SimulatedRobot::SimulatedRobot(const SimConfig& config) : config_(config) {
+  const std::string invalid = validate(config_);
+  if (!invalid.empty()) throw std::invalid_argument(invalid);
+  model_ = loadModelFile(config_.model_path).model;
+  mjModel* m = model_.get();
+  m->opt.timestep = config_.timestep;
+  if (m->opt.integrator == mjINT_IMPLICIT)
+    throw std::invalid_argument("model '" + config_.model_path + "': the implicit integrator is not supported");
+  data_ = makeData(m);
+  actuators_ = NameIndex(m, mjOBJ_ACTUATOR);
+  cylinders_ = description::cylinderTable(m);
+  if (static_cast<int>(cylinders_.size()) != m->nu)
+    throw std::invalid_argument("model '" + config_.model_path + "': every actuator must be a tendon cylinder");
+
+  const std::size_t n = cylinders_.size();
+  valve_limits_.lower.assign(n, -5.0);
+  valve_limits_.upper.assign(n, 5.0);
+  force_limits_.lower.assign(n, 0.0);
+  force_limits_.clamp_above = true;
+  std::vector<double> bore_area;
+  std::vector<pneumatics::CylinderSpec> specs;
+  for (const auto& c : cylinders_) {
+    force_limits_.upper.push_back(c.max_tension);
+    bore_area.push_back(c.bore_area);
+    specs.push_back(plantSpec(c));
+  }
+  if (config_.mode == ActuationMode::kPneumatic) {
+    pneumatics::SupplyParams supply;
+    supply.nominal_pressure = config_.supply_pressure;
+    supply.atmospheric_pressure = description::kAtmosphericPressure;
+    plant_ = std::make_unique<pneumatics::PneumaticPlant>(specs, supply, config_.sensors.seed + 1);
+  }
+
+  for (int j = 0; j < m->njnt; ++j) {
+    if (m->jnt_type[j] != mjJNT_HINGE && m->jnt_type[j] != mjJNT_SLIDE) continue;
+    joint_ids_.push_back(j);
+    joint_names_.push_back(mj_id2name(m, mjOBJ_JOINT, j));
+  }
+  for (int s = 0; s < m->nsensor; ++s) {
+    if (m->sensor_type[s] != mjSENS_TOUCH) continue;
+    touch_adr_.push_back(m->sensor_adr[s]);
+    touch_names_.push_back(mj_id2name(m, mjOBJ_SENSOR, s));
+  }
+  const int object = mj_name2id(m, mjOBJ_BODY, "object");
+  if (object >= 0 && m->body_jntnum[object] == 1 && m->jnt_type[m->body_jntadr[object]] == mjJNT_FREE) {
+    object_body_ = object;
+    object_qpos_ = m->jnt_qposadr[m->body_jntadr[object]];
+    object_dof_ = m->jnt_dofadr[m->body_jntadr[object]];
+  }
+
+  const double idle = config_.mode == ActuationMode::kPneumatic ? kIdleVolts : config_.min_tension;
+  command_.assign(n, idle);
+  applied_command_ = command_;
+  last_command_clock_.assign(n, kNever);
+  travel_.assign(n, 0.0);
+  travel_rate_.assign(n, 0.0);
+  sensors_ = SensorPipeline(config_.sensors, config_.mode, bore_area, description::kAtmosphericPressure,
+                            config_.min_tension);
+
+  std::string error;
+  if (!resetToKeyframe(config_.initial_keyframe, &error)) throw std::invalid_argument("~initial_keyframe: " + error);
+}
+
+// ---------------------------------------------------------------------------- commands
+
+CommandResult SimulatedRobot::acceptCommand(const CheckedCommand& checked) {
+  CommandResult result{checked.verdict, false, checked.error};
+  switch (checked.verdict) {
+    case CommandVerdict::kAccepted: break;
+    case CommandVerdict::kClamped: ++counters_.clamped; break;
+    case CommandVerdict::kBadAddressing:
+    case CommandVerdict::kDuplicate:
+    case CommandVerdict::kEmpty: ++counters_.rejected_addressing; return result;
+    case CommandVerdict::kUnknownName:
+    case CommandVerdict::kIndexOutOfRange: ++counters_.rejected_name; return result;
+    case CommandVerdict::kNotFinite: ++counters_.rejected_not_finite; return result;
+    case CommandVerdict::kOutOfRange: ++counters_.rejected_range; return result;
+  }
+  if (safety_.safe_state) {
+    // Latched: commands are not acted on and do not feed the watchdog.
+    ++counters_.ignored_while_safe;
+    result.error = "ignored: robot is in the safe state (release required)";
+    return result;
+  }
+  ++counters_.accepted;
+  for (std::size_t k = 0; k < checked.actuator.size(); ++k) {
+    command_[checked.actuator[k]] = checked.value[k];
+    last_command_clock_[checked.actuator[k]] = clock_;
+  }
+  safety_.watchdog_armed = true;
+  result.applied = true;
+  return result;
+}
+
+CommandResult SimulatedRobot::commandValves(const std::vector<std::string>& names,
+                                            const std::vector<std::uint16_t>& indices,
+                                            const std::vector<double>& volts) {
+  if (config_.mode != ActuationMode::kPneumatic) {
+    ++counters_.rejected_wrong_mode;
+    return {CommandVerdict::kBadAddressing, false, "valve command rejected: driver is in force mode"};
+  }
+  return acceptCommand(checkCommand(actuators_, names, indices, volts, valve_limits_));
+}
+
+CommandResult SimulatedRobot::commandForces(const std::vector<std::string>& names,
+                                            const std::vector<std::uint16_t>& indices,
+                                            const std::vector<double>& newtons) {
+  if (config_.mode != ActuationMode::kForce) {
+    ++counters_.rejected_wrong_mode;
+    return {CommandVerdict::kBadAddressing, false, "tendon force command rejected: driver is in pneumatic mode"};
+  }
+  return acceptCommand(checkCommand(actuators_, names, indices, newtons, force_limits_));
+}
+
+// ---------------------------------------------------------------------------- safety
+
+void SimulatedRobot::enterSafeState(SafeCause cause) {
+  switch (cause) {
+    case SafeCause::kEstop:
+      safety_.estop_latched = true;
+      ++counters_.estops;
+      break;
+    case SafeCause::kWatchdog:
+      safety_.watchdog_latched = true;
+      ++counters_.watchdog_trips;
+      break;
+    case SafeCause::kFault: safety_.fault_latched = true; break;
+    case SafeCause::kNone: return;
+  }
+  safety_.safe_state = true;
+}
+
+void SimulatedRobot::estop() { enterSafeState(SafeCause::kEstop); }
+
+void SimulatedRobot::setEstopInput(bool held) {
+  if (held && !safety_.estop_input) enterSafeState(SafeCause::kEstop);
+  safety_.estop_input = held;
+}
+
+bool SimulatedRobot::release(std::string* why) {
+  if (safety_.estop_input) {
+    if (why) *why = "refused: the e-stop input is held";
+    return false;
+  }
+  if (safety_.fault_persists) {
+    if (why) *why = "refused: the physics fault persists (" + safety_.fault + "); reset the simulation first";
+    return false;
+  }
+  const bool was_safe = safety_.safe_state;
+  safety_ = SafetyStatus{};
+  // Start again from the idle command; the watchdog re-arms with the next command.
+  std::fill(command_.begin(), command_.end(),
+            config_.mode == ActuationMode::kPneumatic ? kIdleVolts : config_.min_tension);
+  std::fill(last_command_clock_.begin(), last_command_clock_.end(), kNever);
+  if (plant_) plant_->setSupplyEnabled(true);
+  if (why) *why = was_safe ? "released" : "not in the safe state";
+  return true;
+}
+
+// ---------------------------------------------------------------------------- stepping
+
+bool SimulatedRobot::physicsIsBad(std::string* what) const {
+  const mjModel* m = model_.get();
+  const mjData* d = data_.get();
+  for (int i = 0; i < m->nq; ++i)
+    if (mju_isBad(d->qpos[i])) return *what = "bad qpos[" + std::to_string(i) + "]", true;
+  for (int i = 0; i < m->nv; ++i)
+    if (mju_isBad(d->qvel[i])) return *what = "bad qvel[" + std::to_string(i) + "]", true;
+  return false;
+}
+
+void SimulatedRobot::applyActuation() {
+  const std::size_t n = cylinders_.size();
+  const bool safe = safety_.safe_state;
+  mjData* d = data_.get();
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto& c = cylinders_[i];
+    // The chamber grows as the tendon shortens (cylinders.h).
+    travel_[i] = description::pistonTravel(c, d->ten_length[c.tendon]);
+    travel_rate_[i] = -d->ten_velocity[c.tendon];
+  }
+  if (plant_) {
+    for (std::size_t i = 0; i < n; ++i) applied_command_[i] = safe ? kExhaustVolts : command_[i];
+    plant_->setSupplyEnabled(!safe);
+    plant_->step(config_.timestep, applied_command_.data(), travel_.data(), travel_rate_.data());
+    for (std::size_t i = 0; i < n; ++i)
+      d->ctrl[cylinders_[i].actuator] =
+          std::clamp(std::max(config_.min_tension, plant_->tension(i)), 0.0, cylinders_[i].max_tension);
+  } else {
+    for (std::size_t i = 0; i < n; ++i) {
+      applied_command_[i] = safe ? config_.min_tension : std::max(config_.min_tension, command_[i]);
+      d->ctrl[cylinders_[i].actuator] = std::clamp(applied_command_[i], 0.0, cylinders_[i].max_tension);
+    }
+  }
+}
+
+// mj_step split open so that (1) the plant sees the piston travel of the current state and
+// (2) a bad state is refused instead of being silently reset: MuJoCo's own checks in
+// mj_step reset mjData on bad qpos/qvel/qacc, which would erase the evidence.
+bool SimulatedRobot::physicsStep() {
+  const mjModel* m = model_.get();
+  mjData* d = data_.get();
+  std::string what;
+  if (physicsIsBad(&what)) {
+    // Pressures still evolve (the safe state exhausts them); physics stays frozen.
+    applyActuation();
+    safety_.fault = safety_.fault.empty() ? what : safety_.fault;
+    return false;
+  }
+  mj_fwdPosition(m, d);
+  mj_sensorPos(m, d);
+  mj_fwdVelocity(m, d);
+  mj_sensorVel(m, d);
+  applyActuation();
+  mj_fwdActuation(m, d);
+  mj_fwdAcceleration(m, d);
+  mj_fwdConstraint(m, d);
+  mj_sensorAcc(m, d);
+  for (int i = 0; i < m->nv; ++i) {
+    if (mju_isBad(d->qacc[i])) {
+      if (safety_.fault.empty()) safety_.fault = "bad qacc[" + std::to_string(i) + "]";
+      return false;
+    }
+  }
+  if (m->opt.integrator == mjINT_RK4) {
+    mj_RungeKutta(m, d, 4);
+  } else {
+    mj_Euler(m, d);
+  }
+  return true;
+}
+
+void SimulatedRobot::step() {
+  // Watchdog: every cylinder a controller has commanded must keep being commanded.
+  if (!safety_.safe_state && safety_.watchdog_armed) {
+    for (double t : last_command_clock_) {
+      if (t != kNever && clock_ - t >= config_.watchdog_timeout - 1e-9) {
+        enterSafeState(SafeCause::kWatchdog);
+        break;
+      }
+    }
+  }
+  const bool ok = physicsStep();
+  safety_.fault_persists = !ok;
+  if (!ok) {
+    ++counters_.faults;
+    enterSafeState(SafeCause::kFault);
+  }
+  clock_ += config_.timestep;
+  ++counters_.steps;
+  computeTruth();
+  sensors_.update(clock_, config_.timestep, truth_);
+}
+
+void SimulatedRobot::computeTruth() {
+  const mjModel* m = model_.get();
+  const mjData* d = data_.get();
+  const std::size_t nj = joint_ids_.size(), n = cylinders_.size();
+  truth_.joint_position.resize(nj);
+  truth_.joint_velocity.resize(nj);
+  truth_.joint_effort.resize(nj);
+  for (std::size_t k = 0; k < nj; ++k) {
+    const int j = joint_ids_[k];
+    truth_.joint_position[k] = d->qpos[m->jnt_qposadr[j]];
+    truth_.joint_velocity[k] = d->qvel[m->jnt_dofadr[j]];
+    truth_.joint_effort[k] = d->qfrc_actuator[m->jnt_dofadr[j]];
+  }
+  truth_.pressure.resize(n);
+  truth_.tension.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double tension = d->ctrl[cylinders_[i].actuator];
+    truth_.tension[i] = tension;
+    // Force mode has no chamber: report the pressure that would produce the tension.
+    truth_.pressure[i] = plant_ ? plant_->pressure()[i] : description::kAtmosphericPressure + tension / cylinders_[i].bore_area;
+  }
+  truth_.length = travel_;
+  truth_.length_rate = travel_rate_;
+  truth_.supply_pressure = plant_ ? plant_->supplyPressure()
+                                  : (safety_.safe_state ? description::kAtmosphericPressure : config_.supply_pressure);
+  truth_.touch.resize(touch_adr_.size());
+  for (std::size_t k = 0; k < touch_adr_.size(); ++k) truth_.touch[k] = d->sensordata[touch_adr_[k]];
+  if (object_body_ >= 0) {
+    std::copy(d->qpos + object_qpos_, d->qpos + object_qpos_ + 7, truth_.object.begin());
+    std::copy(d->qvel + object_dof_, d->qvel + object_dof_ + 6, truth_.object.begin() + 7);
+  }
+}
+
+// ---------------------------------------------------------------------------- state
+
+SimState SimulatedRobot::state() const {
+  const mjModel* m = model_.get();
+  const mjData* d = data_.get();
+  SimState s;
+  s.physics = std::shared_ptr<const mjData>(copyData(m, d).release(), DataDeleter());
+  s.physics_time = d->time;
+  s.qpos.assign(d->qpos, d->qpos + m->nq);
+  s.qvel.assign(d->qvel, d->qvel + m->nv);
+  s.act.assign(d->act, d->act + m->na);
+  s.qacc_warmstart.assign(d->qacc_warmstart, d->qacc_warmstart + m->nv);
+  if (plant_) s.plant = plant_->state();
+  s.command = command_;
+  s.sensors = sensors_;
+  s.sensors_clock = clock_;
+  return s;
+}
+
+void SimulatedRobot::setState(const SimState& s) {
+  const mjModel* m = model_.get();
+  mjData* d = data_.get();
+  if (static_cast<int>(s.qpos.size()) != m->nq || static_cast<int>(s.qvel.size()) != m->nv ||
+      static_cast<int>(s.act.size()) != m->na || static_cast<int>(s.qacc_warmstart.size()) != m->nv ||
+      s.command.size() != cylinders_.size() || (plant_ && s.plant.pressure.size() != cylinders_.size()))
+    throw std::invalid_argument("SimulatedRobot::setState: state does not match model '" + config_.model_path + "'");
+  if (plant_) plant_->setState(s.plant);  // validates and may throw before anything changes
+  d->time = s.physics_time;
+  std::copy(s.qpos.begin(), s.qpos.end(), d->qpos);
+  std::copy(s.qvel.begin(), s.qvel.end(), d->qvel);
+  std::copy(s.act.begin(), s.act.end(), d->act);
+  std::copy(s.qacc_warmstart.begin(), s.qacc_warmstart.end(), d->qacc_warmstart);
+  command_ = s.command;
+  sensors_ = s.sensors;
+  // The sensors' delay lines are stamped with the clock of capture; time never goes back,
+  // so shift them to now.
+  sensors_.shiftTime(clock_ - s.sensors_clock);
+  if (physicsCopyMatches(m, s)) {
+    mj_copyData(d, m, s.physics.get());  // everything, intermediates included: exact replay
+  } else {
+    mj_forward(m, d);
+    // mj_forward's constraint solver overwrites the warm start; the next step must start
+    // from the saved one to replay exactly.
+    std::copy(s.qacc_warmstart.begin(), s.qacc_warmstart.end(), d->qacc_warmstart);
+  }
+  for (std::size_t i = 0; i < cylinders_.size(); ++i) {
+    travel_[i] = description::pistonTravel(cylinders_[i], d->ten_length[cylinders_[i].tendon]);
+    travel_rate_[i] = -d->ten_velocity[cylinders_[i].tendon];
+  }
+  computeTruth();
+  safety_.fault_persists = false;
+}
+
+void SimulatedRobot::afterTeleport() {
+  const mjModel* m = model_.get();
+  mjData* d = data_.get();
+  // Tensions for the new state so derived data (and the published efforts) match it.
+  mj_fwdPosition(m, d);
+  mj_fwdVelocity(m, d);
+  for (std::size_t i = 0; i < cylinders_.size(); ++i) {
+    travel_[i] = description::pistonTravel(cylinders_[i], d->ten_length[cylinders_[i].tendon]);
+    travel_rate_[i] = -d->ten_velocity[cylinders_[i].tendon];
+    const double tension = plant_ ? plant_->tension(i) : command_[i];
+    d->ctrl[cylinders_[i].actuator] = std::clamp(std::max(config_.min_tension, tension), 0.0, cylinders_[i].max_tension);
+  }
+  mj_forward(m, d);
+  computeTruth();
+  sensors_.restart(clock_, truth_);
+  safety_.fault_persists = false;
+}
+
+namespace {
+// Plant state with every chamber at `pressure`, the supply at its level, and the delay
+// line holding `volts` as if it had always been commanded.
+pneumatics::PlantState settledPlant(const pneumatics::PneumaticPlant& plant, const std::vector<double>& pressure,
+                                    const std::vector<double>& volts, bool safe) {
+  pneumatics::PlantState s = plant.state();
+  s.pressure = pressure;
+  s.supply_pressure = safe ? plant.atmosphericPressure() : plant.supplyParams().nominal_pressure;
+  s.supply_enabled = !safe;
+  s.history_time.assign(1, s.time - 1.0);
+  s.history_volts = volts;
+  return s;
+}
+}  // namespace
+
+bool SimulatedRobot::resetToKeyframe(const std::string& keyframe, std::string* error) {
+  const mjModel* m = model_.get();
+  mjData* d = data_.get();
+  if (keyframe.empty()) {
+    if (m->nkey > 0) mj_resetDataKeyframe(m, d, 0); else mj_resetData(m, d);
+  } else {
+    const int key = mj_name2id(m, mjOBJ_KEY, keyframe.c_str());
+    if (key < 0) {
+      if (error) *error = "unknown keyframe '" + keyframe + "' (known: " + joinNames(NameIndex(m, mjOBJ_KEY)) + ")";
+      return false;
+    }
+    mj_resetDataKeyframe(m, d, key);
+  }
+  if (plant_) {
+    const std::vector<double> atmosphere(cylinders_.size(), plant_->atmosphericPressure());
+    const std::vector<double> volts = safety_.safe_state ? std::vector<double>(cylinders_.size(), kExhaustVolts) : command_;
+    plant_->setState(settledPlant(*plant_, atmosphere, volts, safety_.safe_state));
+  }
+  afterTeleport();
+  return true;
+}
+
+bool SimulatedRobot::resetToState(const std::vector<double>& qpos, const std::vector<double>& qvel,
+                                  const std::vector<double>& pressure, std::string* error) {
+  const mjModel* m = model_.get();
+  auto fail = [&](const std::string& what) {
+    if (error) *error = what;
+    return false;
+  };
+  if (!qpos.empty() && static_cast<int>(qpos.size()) != m->nq)
+    return fail("qpos has " + std::to_string(qpos.size()) + " values, the model needs " + std::to_string(m->nq));
+  if (!qvel.empty() && static_cast<int>(qvel.size()) != m->nv)
+    return fail("qvel has " + std::to_string(qvel.size()) + " values, the model needs " + std::to_string(m->nv));
+  if (!pressure.empty() && !plant_) return fail("pressure given but the driver is in force mode (no chambers)");
+  if (!pressure.empty() && pressure.size() != cylinders_.size())
+    return fail("pressure has " + std::to_string(pressure.size()) + " values, the model has " +
+                std::to_string(cylinders_.size()) + " cylinders");
+  if (!allFinite(qpos) || !allFinite(qvel) || !allFinite(pressure)) return fail("state contains NaN or Inf");
+  for (double p : pressure)
+    if (p < 1e3 || p > 2e6) return fail("pressure " + std::to_string(p) + " Pa outside [1e3, 2e6] Pa absolute");
+  std::string ignored;
+  resetToKeyframe("", &ignored);  // model default for whatever is not given
+  mjData* d = data_.get();
+  if (!qpos.empty()) std::copy(qpos.begin(), qpos.end(), d->qpos);
+  if (!qvel.empty()) std::copy(qvel.begin(), qvel.end(), d->qvel);
+  if (plant_ && !pressure.empty()) {
+    const std::vector<double> volts = safety_.safe_state ? std::vector<double>(cylinders_.size(), kExhaustVolts) : command_;
+    plant_->setState(settledPlant(*plant_, pressure, volts, safety_.safe_state));
+  }
+  afterTeleport();
+  return true;
+}
+
+bool SimulatedRobot::setObjectPose(const std::array<double, 3>& position, const std::array<double, 4>& quaternion,
+                                   const std::array<double, 3>& linear, const std::array<double, 3>& angular,
+                                   std::string* error) {
+  auto fail = [&](const std::string& what) {
+    if (error) *error = what;
+    return false;
+  };
+  if (object_body_ < 0) return fail("the scene has no free body named 'object'");
+  for (double v : position) if (!std::isfinite(v)) return fail("position contains NaN or Inf");
+  for (double v : linear) if (!std::isfinite(v)) return fail("linear velocity contains NaN or Inf");
+  for (double v : angular) if (!std::isfinite(v)) return fail("angular velocity contains NaN or Inf");
+  double norm = 0;
+  for (double v : quaternion) {
+    if (!std::isfinite(v)) return fail("orientation contains NaN or Inf");
+    norm += v * v;
+  }
+  norm = std::sqrt(norm);
+  if (norm < 1e-6) return fail("orientation is not a quaternion (norm ~ 0)");
+  mjData* d = data_.get();
+  double* q = d->qpos + object_qpos_;
+  for (int k = 0; k < 3; ++k) q[k] = position[k];
+  for (int k = 0; k < 4; ++k) q[3 + k] = quaternion[k] / norm;
+  // Free joint velocity: linear in the world frame, angular in the body frame.
+  double rot[9], angular_body[3];
+  mju_quat2Mat(rot, q + 3);
+  mju_rotVecMatT(angular_body, angular.data(), rot);
+  double* v = d->qvel + object_dof_;
+  for (int k = 0; k < 3; ++k) {
+    v[k] = linear[k];
+    v[3 + k] = angular_body[k];
+  }
+  afterTeleport();
+  return true;
+}
+
+}  // namespace adroit::driver

@@ -1,0 +1,34 @@
+#!/usr/bin/python3
+"""sim.launch brings the simulated robot up: the driver streams, tf reaches the fingertips
+through robot_state_publisher and the object through the driver, diagnostics say running."""
+import unittest
+
+import rospy
+import rostest
+import tf2_ros
+from adroit_msgs.msg import ActuatorStates
+from diagnostic_msgs.msg import DiagnosticArray
+from sensor_msgs.msg import JointState
+
+
+class SimBringup(unittest.TestCase):
+    def test_streams_and_tf(self):
+        js = rospy.wait_for_message("/adroit/joint_states", JointState, timeout=30)
+        self.assertEqual(len(js.name), 28)
+        acts = rospy.wait_for_message("/adroit/actuator_states", ActuatorStates, timeout=10)
+        self.assertEqual(len(acts.pressure), 48)
+        self.assertGreater(acts.supply_pressure, 500e3)
+        buf = tf2_ros.Buffer()
+        tf2_ros.TransformListener(buf)
+        tip = buf.lookup_transform("world", "thdistal", rospy.Time(0), rospy.Duration(20)).transform.translation
+        obj = buf.lookup_transform("world", "object", rospy.Time(0), rospy.Duration(20)).transform.translation
+        # The ball of the scene rests on the table (radius 3.5 cm) in front of the arm.
+        self.assertAlmostEqual(obj.z, 0.035, delta=0.01)
+        self.assertLess(abs(tip.x), 1.0)
+        diag = rospy.wait_for_message("/adroit/diagnostics", DiagnosticArray, timeout=10)
+        self.assertEqual(diag.status[0].message, "running")
+
+
+if __name__ == "__main__":
+    rospy.init_node("test_sim_bringup")
+    rostest.rosrun("adroit_launch", "sim_bringup", SimBringup)

@@ -28,13 +28,13 @@ double tendonMoment(const mjModel* m, const mjData* d, int tendon, int dof) {
 
 // Tendon length with every joint it spans set to the limit that lengthens it.
 // Moment arms are taken at the model's reference pose; the routing keeps their sign.
-std::pair<double, double> tendonLengthRange(const mjModel* m, int tendon) {
-  DataPtr d = makeData(m);
-  mj_fwdPosition(m, d.get());
+std::pair<double, double> tendonLengthRange(const mjModel* m, mjData* d, int tendon) {
+  mj_resetData(m, d);
+  mj_fwdPosition(m, d);
   std::vector<double> longest(d->qpos, d->qpos + m->nq), shortest = longest;
   for (int j = 0; j < m->njnt; ++j) {
     if (m->jnt_type[j] != mjJNT_HINGE && m->jnt_type[j] != mjJNT_SLIDE) continue;
-    const double moment = tendonMoment(m, d.get(), tendon, m->jnt_dofadr[j]);
+    const double moment = tendonMoment(m, d, tendon, m->jnt_dofadr[j]);
     if (moment == 0 || !m->jnt_limited[j]) continue;
     const double lo = m->jnt_range[2 * j], hi = m->jnt_range[2 * j + 1];
     longest[m->jnt_qposadr[j]] = moment > 0 ? hi : lo;
@@ -42,7 +42,7 @@ std::pair<double, double> tendonLengthRange(const mjModel* m, int tendon) {
   }
   auto lengthAt = [&](const std::vector<double>& q) {
     std::copy(q.begin(), q.end(), d->qpos);
-    mj_fwdPosition(m, d.get());
+    mj_fwdPosition(m, d);
     return d->ten_length[tendon];
   };
   return {lengthAt(shortest), lengthAt(longest)};
@@ -52,6 +52,7 @@ std::pair<double, double> tendonLengthRange(const mjModel* m, int tendon) {
 
 std::vector<Cylinder> cylinderTable(const mjModel* m) {
   std::vector<Cylinder> table;
+  DataPtr scratch = makeData(m);
   for (int a = 0; a < m->nu; ++a) {
     if (m->actuator_trntype[a] != mjTRN_TENDON) continue;
     Cylinder c;
@@ -71,7 +72,7 @@ std::vector<Cylinder> cylinderTable(const mjModel* m) {
     }
     c.bore_area = M_PI * c.bore_diameter * c.bore_diameter / 4.0;
     c.max_tension = m->actuator_ctrlrange[2 * a + 1];
-    const auto [shortest, longest] = tendonLengthRange(m, c.tendon);
+    const auto [shortest, longest] = tendonLengthRange(m, scratch.get(), c.tendon);
     c.longest_tendon_length = longest;
     if (longest - shortest > c.stroke + 1e-9) {
       throw std::runtime_error("actuator '" + c.name + "': tendon travel " + std::to_string(longest - shortest) +

@@ -236,6 +236,7 @@ void SimDriver::loop() {
       }
       robot_->step();
       clock_after = robot_->clock();
+      steps_done_.store(robot_->counters().steps, std::memory_order_relaxed);
     }
     const auto compute_end = SteadyClock::now();
     if (params_.realtime && !requested) {
@@ -272,25 +273,30 @@ void SimDriver::loop() {
 }
 
 void SimDriver::publishDue(bool all, double wall_now) {
-  Batch batch;
-  batch.all = all;
+  std::uint64_t slot_index;
+  {
+    std::unique_lock<std::mutex> lock(publish_mutex_);
+    publish_cv_.wait(lock, [this] { return queued_batches_ - published_batches_ < kRingSize || !running_; });
+    if (!running_ && !all) return;
+    slot_index = queued_batches_;
+  }
+  // The slot is this thread's until queued_batches_ moves past it.
+  Batch& batch = ring_[slot_index % kRingSize];
   {
     std::lock_guard<std::mutex> lock(robot_mutex_);
     const std::uint64_t k = robot_->counters().steps;
-    const bool joints = all || k % joint_every_ == 0;
-    const bool actuators = all || k % actuator_every_ == 0;
-    const bool touch = all || k % touch_every_ == 0;
-    const bool object = robot_->hasObject() && (all || k % object_every_ == 0);
-    fillMessages(joints, actuators, touch, object);
-    // Copies for the publisher thread; the members stay the reusable templates (names).
-    if (params_.use_sim_time && !all) {
-      batch.clock = boost::make_shared<rosgraph_msgs::Clock>();
-      batch.clock->clock = ros::Time(robot_->clock());
-    }
-    if (joints) batch.joints = boost::make_shared<sensor_msgs::JointState>(joint_msg_);
-    if (actuators) batch.actuators = boost::make_shared<adroit_msgs::ActuatorStates>(actuator_msg_);
-    if (touch) batch.touch = boost::make_shared<adroit_msgs::Touch>(touch_msg_);
-    if (object) batch.odom = boost::make_shared<nav_msgs::Odometry>(odom_msg_);
+    batch.all = all;
+    batch.clock = params_.use_sim_time && !all;
+    batch.joints = all || k % joint_every_ == 0;
+    batch.actuators = all || k % actuator_every_ == 0;
+    batch.touch = all || k % touch_every_ == 0;
+    batch.object = robot_->hasObject() && (all || k % object_every_ == 0);
+    batch.sim_clock = robot_->clock();
+    batch.stamp = stamp();
+    const Signals& sensed = robot_->sensed();
+    if (batch.joints || batch.actuators || batch.touch || batch.object) batch.signals = sensed;
+    if (batch.actuators) batch.command = robot_->appliedCommand();
+    batch.markers.reset();
     const bool markers = params_.marker_rate > 0 &&
                          (all || wall_now - last_marker_wall_ >= 1.0 / params_.marker_rate) &&
                          marker_pub_.getNumSubscribers() > 0;
@@ -300,14 +306,13 @@ void SimDriver::publishDue(bool all, double wall_now) {
       batch.markers = boost::make_shared<visualization_msgs::MarkerArray>(marker_msg_);
     }
   }
+  bool wake;
   {
-    std::unique_lock<std::mutex> lock(publish_mutex_);
-    publish_cv_.wait(lock, [this] { return publish_queue_.size() < kMaxQueuedBatches || !running_; });
-    if (!running_ && !all) return;
-    publish_queue_.push_back(std::move(batch));
+    std::lock_guard<std::mutex> lock(publish_mutex_);
     ++queued_batches_;
+    wake = publisher_idle_;  // waking a thread costs microseconds: only when it sleeps
   }
-  publish_cv_.notify_all();
+  if (wake) publish_cv_.notify_all();
   publishSafeStateIfChanged();
 }
 
@@ -338,77 +343,81 @@ void SimDriver::republishAndWait() {
 
 void SimDriver::publishLoop() {
   for (;;) {
-    Batch batch;
+    std::uint64_t first, end;
     {
       std::unique_lock<std::mutex> lock(publish_mutex_);
-      publish_cv_.wait(lock, [this] { return !publish_queue_.empty() || !publisher_running_; });
-      if (publish_queue_.empty()) return;
-      batch = std::move(publish_queue_.front());
-      publish_queue_.pop_front();
+      publisher_idle_ = true;
+      publish_cv_.wait(lock, [this] { return published_batches_ < queued_batches_ || !publisher_running_; });
+      publisher_idle_ = false;
+      if (published_batches_ == queued_batches_) return;  // stopping and drained
+      first = published_batches_;
+      end = queued_batches_;  // everything queued: one wake-up for many steps
     }
-    publish_cv_.notify_all();  // room for the simulation thread
-    publishBatch(batch);
+    for (std::uint64_t i = first; i < end; ++i) publishBatch(ring_[i % kRingSize]);
     {
       std::lock_guard<std::mutex> lock(publish_mutex_);
-      ++published_batches_;
+      published_batches_ = end;
     }
-    publish_cv_.notify_all();  // a service waiting for its republish
+    publish_cv_.notify_all();  // room for the simulation thread; services waiting for a republish
   }
 }
 
 void SimDriver::publishBatch(const Batch& batch) {
+  fillMessages(batch);
   // /clock first, so that a stamp never arrives ahead of the clock it refers to.
-  if (batch.clock) clock_pub_.publish(batch.clock);
+  if (batch.clock) {
+    rosgraph_msgs::Clock clock;
+    clock.clock = ros::Time(batch.sim_clock);
+    clock_pub_.publish(clock);
+  }
   if (batch.joints) {
-    joint_pub_.publish(batch.joints);
+    joint_pub_.publish(joint_msg_);
     const double wall_now = wallSeconds();
     std::lock_guard<std::mutex> lock(stats_mutex_);
     if (!batch.all && last_joint_wall_ > 0 && joint_intervals_.size() < 2000000)
       joint_intervals_.push_back(wall_now - last_joint_wall_);
     last_joint_wall_ = batch.all ? -1 : wall_now;
   }
-  if (batch.actuators) actuator_pub_.publish(batch.actuators);
-  if (batch.touch) touch_pub_.publish(batch.touch);
-  if (batch.odom) {
-    odom_pub_.publish(batch.odom);
+  if (batch.actuators) actuator_pub_.publish(actuator_msg_);
+  if (batch.touch) touch_pub_.publish(touch_msg_);
+  if (batch.object) {
+    odom_pub_.publish(odom_msg_);
     geometry_msgs::TransformStamped t;
-    t.header = batch.odom->header;
-    t.child_frame_id = batch.odom->child_frame_id;
-    t.transform.translation.x = batch.odom->pose.pose.position.x;
-    t.transform.translation.y = batch.odom->pose.pose.position.y;
-    t.transform.translation.z = batch.odom->pose.pose.position.z;
-    t.transform.rotation = batch.odom->pose.pose.orientation;
+    t.header = odom_msg_.header;
+    t.child_frame_id = odom_msg_.child_frame_id;
+    t.transform.translation.x = odom_msg_.pose.pose.position.x;
+    t.transform.translation.y = odom_msg_.pose.pose.position.y;
+    t.transform.translation.z = odom_msg_.pose.pose.position.z;
+    t.transform.rotation = odom_msg_.pose.pose.orientation;
     tf_->sendTransform(t);
   }
   if (batch.markers) marker_pub_.publish(batch.markers);
 }
 
-// Called with robot_mutex_ held.
-void SimDriver::fillMessages(bool joints, bool actuators, bool touch, bool object) {
-  const Signals& s = robot_->sensed();
-  const ros::Time now = stamp();
-  if (joints) {
-    joint_msg_.header.stamp = now;
+void SimDriver::fillMessages(const Batch& batch) {
+  const Signals& s = batch.signals;
+  if (batch.joints) {
+    joint_msg_.header.stamp = batch.stamp;
     joint_msg_.position = s.joint_position;
     joint_msg_.velocity = s.joint_velocity;
     joint_msg_.effort = s.joint_effort;
   }
-  if (actuators) {
-    actuator_msg_.header.stamp = now;
+  if (batch.actuators) {
+    actuator_msg_.header.stamp = batch.stamp;
     actuator_msg_.pressure = s.pressure;
     actuator_msg_.length = s.length;
     actuator_msg_.length_rate = s.length_rate;
     actuator_msg_.force = s.tension;
-    actuator_msg_.command = robot_->appliedCommand();
+    actuator_msg_.command = batch.command;
     actuator_msg_.supply_pressure = s.supply_pressure;
   }
-  if (touch) {
-    touch_msg_.header.stamp = now;
+  if (batch.touch) {
+    touch_msg_.header.stamp = batch.stamp;
     touch_msg_.force = s.touch;
   }
-  if (object) {
+  if (batch.object) {
     const auto& o = s.object;
-    odom_msg_.header.stamp = now;
+    odom_msg_.header.stamp = batch.stamp;
     auto& pose = odom_msg_.pose.pose;
     pose.position.x = o[0], pose.position.y = o[1], pose.position.z = o[2];
     pose.orientation.w = o[3], pose.orientation.x = o[4], pose.orientation.y = o[5], pose.orientation.z = o[6];
@@ -675,9 +684,6 @@ std::vector<double> SimDriver::takeJointIntervals() {
   return out;
 }
 
-std::uint64_t SimDriver::steps() {
-  std::lock_guard<std::mutex> lock(robot_mutex_);
-  return robot_->counters().steps;
-}
+std::uint64_t SimDriver::steps() { return steps_done_.load(std::memory_order_relaxed); }
 
 }  // namespace adroit::driver

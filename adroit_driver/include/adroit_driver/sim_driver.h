@@ -7,7 +7,6 @@
 
 #include <atomic>
 #include <condition_variable>
-#include <deque>
 #include <memory>
 #include <mutex>
 #include <stdexcept>
@@ -72,16 +71,17 @@ class SimDriver {
   std::uint64_t steps();
 
  private:
-  // Messages due after one step, handed from the simulation thread to the publisher
-  // thread: serialising and sending costs about as much as a physics step, so it runs on
-  // the other core instead of slowing the simulation down.
+  // What is due after one step, handed from the simulation thread to the publisher thread:
+  // building, serialising and sending the messages costs about as much as a physics step,
+  // so it runs on the other core. Slots live in a ring and are reused, so handing a step
+  // over copies a few hundred numbers and allocates nothing.
   struct Batch {
     bool all = false;  // an explicit republish (after reset / set pose), not a step
-    rosgraph_msgs::Clock::Ptr clock;
-    sensor_msgs::JointState::Ptr joints;
-    adroit_msgs::ActuatorStates::Ptr actuators;
-    adroit_msgs::Touch::Ptr touch;
-    nav_msgs::Odometry::Ptr odom;
+    bool clock = false, joints = false, actuators = false, touch = false, object = false;
+    double sim_clock = 0;
+    ros::Time stamp;
+    Signals signals;
+    std::vector<double> command;
     visualization_msgs::MarkerArray::Ptr markers;
   };
 
@@ -93,7 +93,7 @@ class SimDriver {
   void republishAndWait();
   std::uint64_t queuedBatches();
   void waitForPublication(std::uint64_t batches);  // until that many batches are sent
-  void fillMessages(bool joints, bool actuators, bool touch, bool object);
+  void fillMessages(const Batch& batch);  // publisher thread
   void fillMarkers();
   ros::Time stamp() const;
 
@@ -121,7 +121,8 @@ class SimDriver {
   ros::WallTimer diag_timer_;
   std::unique_ptr<tf2_ros::TransformBroadcaster> tf_;
 
-  // robot_ and the messages below are guarded by robot_mutex_.
+  // robot_ and marker_msg_ are guarded by robot_mutex_; the other messages belong to the
+  // publisher thread.
   std::mutex robot_mutex_;
   sensor_msgs::JointState joint_msg_;
   adroit_msgs::ActuatorStates actuator_msg_;
@@ -140,15 +141,20 @@ class SimDriver {
   std::uint64_t pending_steps_ = 0;
   bool publish_now_ = false;
   std::atomic<bool> running_{false};
+  // Steps simulated so far, readable without the robot lock (a poller must not stall the
+  // simulation thread).
+  std::atomic<std::uint64_t> steps_done_{0};
   std::thread thread_;
 
-  // Publication queue, guarded by publish_mutex_. Bounded: when the publisher falls behind
+  // Publication ring: slots [published_batches_, queued_batches_) wait for the publisher;
+  // the counters are guarded by publish_mutex_. Bounded: when the publisher falls behind
   // the simulation waits, so no state is dropped and memory stays bounded.
-  static constexpr std::size_t kMaxQueuedBatches = 64;
+  static constexpr std::size_t kRingSize = 64;
   std::mutex publish_mutex_;
   std::condition_variable publish_cv_;
-  std::deque<Batch> publish_queue_;
+  std::vector<Batch> ring_ = std::vector<Batch>(kRingSize);
   bool publisher_running_ = false;
+  bool publisher_idle_ = false;  // the publisher waits for work (needs a wake-up)
   std::uint64_t queued_batches_ = 0, published_batches_ = 0;
   std::thread publisher_;
 

@@ -1,0 +1,106 @@
+#!/usr/bin/python3
+"""Watches the running system for ~duration seconds, then prints what it did and exits:
+joint range of motion per finger, force tracking of the pneumatic pools (desired tension
+from /adroit/force_reference against the measured tension in /adroit/actuator_states), and
+the driver's own diagnostics (real-time factor, step time, safety state)."""
+import math
+import sys
+from collections import defaultdict
+
+import rospy
+from adroit_msgs.msg import ActuatorStates, ForceReference
+from diagnostic_msgs.msg import DiagnosticArray
+from sensor_msgs.msg import JointState
+
+
+class DemoReport:
+    def __init__(self):
+        self.duration = float(rospy.get_param("~duration", 20.0))
+        self.settle = float(rospy.get_param("~settle", 2.0))  # ignore the start-up transient
+        self.joint_min, self.joint_max = {}, {}
+        self.reference = None
+        self.sq_error = defaultdict(float)
+        self.samples = defaultdict(int)
+        self.driver_status = {}
+        self.start = None
+        rospy.Subscriber("/adroit/joint_states", JointState, self.on_joints, queue_size=50)
+        rospy.Subscriber("/adroit/force_reference", ForceReference, self.on_reference, queue_size=5)
+        rospy.Subscriber("/adroit/actuator_states", ActuatorStates, self.on_actuators, queue_size=50)
+        rospy.Subscriber("/adroit/diagnostics", DiagnosticArray, self.on_diagnostics, queue_size=10)
+
+    def measuring(self, stamp):
+        if self.start is None:
+            self.start = stamp
+        return (stamp - self.start).to_sec() >= self.settle
+
+    def on_joints(self, msg):
+        if not self.measuring(msg.header.stamp):
+            return
+        for name, q in zip(msg.name, msg.position):
+            self.joint_min[name] = min(q, self.joint_min.get(name, q))
+            self.joint_max[name] = max(q, self.joint_max.get(name, q))
+
+    def on_reference(self, msg):
+        self.reference = msg
+
+    def desired(self, name, stamp):
+        ref = self.reference
+        if ref is None or name not in ref.name:
+            return None
+        k = (stamp - ref.header.stamp).to_sec() / ref.dt
+        if k < 0 or k > ref.steps - 1:
+            return None
+        j, n = ref.name.index(name), len(ref.name)
+        k0 = int(math.floor(k))
+        k1 = min(k0 + 1, ref.steps - 1)
+        a = k - k0
+        return (1 - a) * ref.force[k0 * n + j] + a * ref.force[k1 * n + j]
+
+    def on_actuators(self, msg):
+        if not self.measuring(msg.header.stamp):
+            return
+        for name, force in zip(msg.name, msg.force):
+            want = self.desired(name, msg.header.stamp)
+            if want is None:
+                continue
+            group = "arm" if name.startswith("A_AR") else "wrist" if name.startswith("A_WR") else name[2:4].lower()
+            self.sq_error[group] += (force - want) ** 2
+            self.samples[group] += 1
+
+    def on_diagnostics(self, msg):
+        for status in msg.status:
+            if status.name == "adroit_sim":
+                self.driver_status = {kv.key: kv.value for kv in status.values}
+
+    def report(self):
+        print("\n== ADROIT demo report ==")
+        print("joint range of motion over the run [deg]:")
+        for finger in ("WR", "FF", "MF", "RF", "LF", "TH", "AR"):
+            names = sorted(n for n in self.joint_min if n.startswith(finger))
+            if names:
+                spans = ", ".join(f"{n} {math.degrees(self.joint_max[n] - self.joint_min[n]):.0f}" for n in names)
+                print(f"  {finger}: {spans}")
+        if self.samples:
+            print("pneumatic force tracking, RMSE of measured vs desired tendon tension [N]:")
+            for group in sorted(self.samples):
+                rmse = math.sqrt(self.sq_error[group] / self.samples[group])
+                print(f"  {group:6s} {rmse:6.2f}   ({self.samples[group]} samples)")
+        if self.driver_status:
+            keys = [k for k in ("real_time_factor", "step_time", "safe_state", "rejected_total", "watchdog_latched")
+                    if k in self.driver_status]
+            print("driver diagnostics:")
+            for k in keys:
+                print(f"  {k}: {self.driver_status[k]}")
+        moved = sum(1 for n in self.joint_min if self.joint_max[n] - self.joint_min[n] > math.radians(5))
+        print(f"{moved} joints moved more than 5 deg")
+        sys.stdout.flush()
+        return moved
+
+
+if __name__ == "__main__":
+    rospy.init_node("demo_report")
+    node = DemoReport()
+    rospy.sleep(node.duration)
+    moved = node.report()
+    rospy.signal_shutdown("demo finished")
+    sys.exit(0 if moved > 0 else 1)

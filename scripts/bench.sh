@@ -18,5 +18,7 @@ run() {
 }
 : > "$WS_ROOT/log/bench/all.txt"
 run rosrun adroit_description scene_report --testspeed --seconds 10
+run rosrun adroit_pneumatics pneumatics_bench
+run rosrun adroit_driver run_bench.sh ball 5 10
 echo "== summary =="
 grep '^RESULT' "$WS_ROOT/log/bench/all.txt"

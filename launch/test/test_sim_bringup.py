@@ -25,8 +25,17 @@ class SimBringup(unittest.TestCase):
         # The ball of the scene rests on the table (radius 3.5 cm) in front of the arm.
         self.assertAlmostEqual(obj.z, 0.035, delta=0.01)
         self.assertLess(abs(tip.x), 1.0)
-        diag = rospy.wait_for_message("/adroit/diagnostics", DiagnosticArray, timeout=10)
-        self.assertEqual(diag.status[0].message, "running")
+        # The driver and, in pneumatic mode, the six pools report on /adroit/diagnostics.
+        statuses = {}
+        sub = rospy.Subscriber("/adroit/diagnostics", DiagnosticArray,
+                               lambda msg: statuses.update({st.name: st.message for st in msg.status}))
+        deadline = rospy.Time.now() + rospy.Duration(15)
+        while rospy.Time.now() < deadline and not ("adroit_sim" in statuses and len(statuses) >= 7):
+            rospy.sleep(0.1)
+        sub.unregister()
+        self.assertEqual(statuses.get("adroit_sim"), "running", statuses)
+        pools = [name for name in statuses if "pool" in name]
+        self.assertEqual(len(pools), 6, statuses)
 
 
 if __name__ == "__main__":

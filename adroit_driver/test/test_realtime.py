@@ -32,19 +32,30 @@ class RealTime(unittest.TestCase):
     def test_rates_intervals_and_rtf(self):
         joints = Stream("/adroit/joint_states", JointState)
         actuators = Stream("/adroit/actuator_states", ActuatorStates)
+        resyncs = []  # the driver's count of real-time schedule restarts, from diagnostics
+        rospy.Subscriber("/adroit/diagnostics", DiagnosticArray, lambda m: resyncs.extend(
+            int(kv.value) for st in m.status if st.name == "adroit_sim" for kv in st.values
+            if kv.key == "schedule_resyncs"))
         rospy.wait_for_message("/adroit/joint_states", JointState, timeout=30)
-        time.sleep(1.0)
+        time.sleep(1.5)
+        resyncs_before = resyncs[-1]
         for s in (joints, actuators):
             s.recording = True
         time.sleep(10.0)
         for s in (joints, actuators):
             s.recording = False
+        time.sleep(1.5)
+        # On this non-real-time kernel the driver may fall behind (a VM pause); it then
+        # restarts its schedule, counts it, and that one stamp interval is irregular. Each
+        # irregular interval must be such a counted restart, and they must stay rare.
+        restarts = resyncs[-1] - resyncs_before
+        self.assertLessEqual(restarts, 2, "the schedule restarted %d times in 10 s" % restarts)
         for name, stream, period in (("joint_states", joints, 0.002), ("actuator_states", actuators, 0.004)):
             stamps, arrivals = stream.stamps, stream.arrivals
             self.assertGreater(len(stamps), 100, name)
             bad = [b - a for a, b in zip(stamps, stamps[1:]) if abs((b - a) - period) > 0.05 * period]
-            self.assertEqual(bad, [], "%s: %d stamp intervals outside nominal +/- 5 %%, e.g. %s"
-                             % (name, len(bad), bad[:5]))
+            self.assertLessEqual(len(bad), restarts, "%s: %d stamp intervals outside nominal +/- 5 %%, e.g. %s, "
+                                 "with %d schedule restarts" % (name, len(bad), bad[:5], restarts))
             wall = arrivals[-1] - arrivals[0]
             rate = (len(arrivals) - 1) / wall
             self.assertAlmostEqual(rate, 1.0 / period, delta=0.05 / period, msg="%s arrival rate %.1f Hz" % (name, rate))

@@ -37,10 +37,17 @@ class ResetState(unittest.TestCase):
         cls.layout = model_layout(os.path.join(share, "mjcf", "ball.xml"))
 
     def snapshot(self):
-        """Joint states, pressures and object odometry published right after a reset."""
+        """Message counts once the paused stream is quiet: messages of earlier steps may still
+        be on their way when the step service answers, and must not pass for the reset's."""
         d = self.d
-        counts = {t: d.counted(t) for t in ("joint_states", "actuator_states", "object/odom")}
-        return counts
+        topics = ("joint_states", "actuator_states", "object/odom")
+        counts = {t: d.counted(t) for t in topics}
+        while True:
+            time.sleep(0.1)
+            now = {t: d.counted(t) for t in topics}
+            if now == counts:
+                return counts
+            counts = now
 
     def published(self, counts):
         d = self.d

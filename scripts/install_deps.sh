@@ -19,7 +19,7 @@ PACKAGES=(
   # simulation
   libmujoco-dev libmujoco-samples libqhull-dev
   # numerics, config, testing, benchmarks
-  libeigen3-dev libyaml-cpp-dev libgtest-dev libgmock-dev libbenchmark-dev
+  libeigen3-dev libyaml-cpp-dev libgtest-dev libgmock-dev libbenchmark-dev python3-numpy
   # screenshots of rviz under a virtual display
   xvfb x11-apps imagemagick
 )

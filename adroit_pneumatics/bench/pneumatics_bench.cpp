@@ -169,32 +169,6 @@ Recording record(const Rig& rig, const std::string& kind, double seconds, std::u
 }
 
 // ---------------------------------------------------------------- 2b. thin-port identification
-// Locked cylinder at `travel`, plant sub-stepped at 0.125 ms, recorded at 0.5 ms, noise-free,
-// no tube delay or valve spread; volume column = swept volume (v_0 is identified).
-Recording thinPortData(const CylinderSpec& spec, double travel, const std::string& kind, double seconds,
-                       std::uint64_t seed) {
-  PlantOptions o;
-  o.tube_delay = 0, o.area_spread = 0, o.offset_spread = 0, o.initial_volts = -3.0;
-  PneumaticPlant plant({spec}, SupplyParams{}, 1, o);
-  ExcitationParams e;
-  e.kind = kind;
-  e.seed = seed;
-  e.step_hold = 0.05;
-  Excitation ex(e);
-  Recording r;
-  r.dt = 5e-4;
-  const double rate = 0.0;
-  for (int k = 0; k < static_cast<int>(seconds / r.dt); ++k) {
-    const double u = ex.next(k * r.dt, r.dt);
-    r.volts.push_back(u);
-    r.pressure.push_back(plant.pressure()[0]);
-    r.volume.push_back(spec.bore_area * travel);
-    r.volume_rate.push_back(0.0);
-    r.supply.push_back(plant.supplyPressure());
-    for (int s = 0; s < 4; ++s) plant.step(r.dt / 4, &u, &travel, &rate);
-  }
-  return r;
-}
 
 void thinPortBenchmark(bool quick) {
   const double secs = quick ? 1.5 : 3.0;
@@ -203,10 +177,10 @@ void thinPortBenchmark(bool quick) {
   leak_free.leak_area = 0.0;
   std::vector<Recording> valve_data, leak_data;
   for (double travel : {0.005, 0.015, 0.035}) {
-    valve_data.push_back(thinPortData(leak_free, travel, "steps", secs, 1));
-    valve_data.push_back(thinPortData(leak_free, travel, "random", secs, 2));
+    valve_data.push_back(recordLockedCylinder(leak_free, travel, "steps", secs, 1));
+    valve_data.push_back(recordLockedCylinder(leak_free, travel, "random", secs, 2));
   }
-  for (double travel : {0.005, 0.02}) leak_data.push_back(thinPortData(truth, travel, "steps", secs, 3));
+  for (double travel : {0.005, 0.02}) leak_data.push_back(recordLockedCylinder(truth, travel, "steps", secs, 3));
   adroit::Stopwatch sw;
   ThinPortParams start;  // the other valve of table 4.4, v_0 twice too large
   start.valve = valveParams(2);

@@ -1,5 +1,7 @@
 #include "adroit_pneumatics/thin_port_id.h"
 
+#include "adroit_pneumatics/excitation.h"
+
 #include <cmath>
 #include <stdexcept>
 
@@ -109,6 +111,31 @@ ThinPortFitReport fitThinPort(const std::vector<Recording>& recs, const ThinPort
   }
   rep.rate_rmse = thinPortRateRmse(recs, rep.params);
   return rep;
+}
+
+Recording recordLockedCylinder(const CylinderSpec& spec, double travel, const std::string& kind, double seconds,
+                               std::uint64_t seed) {
+  PlantOptions o;
+  o.tube_delay = 0, o.area_spread = 0, o.offset_spread = 0, o.initial_volts = -3.0;
+  PneumaticPlant plant({spec}, SupplyParams{}, 1, o);
+  ExcitationParams e;
+  e.kind = kind;
+  e.seed = seed;
+  e.step_hold = 0.05;
+  Excitation ex(e);
+  Recording r;
+  r.dt = 5e-4;
+  const double rate = 0.0;
+  for (int k = 0; k < static_cast<int>(seconds / r.dt); ++k) {
+    const double u = ex.next(k * r.dt, r.dt);
+    r.volts.push_back(u);
+    r.pressure.push_back(plant.pressure()[0]);
+    r.volume.push_back(spec.bore_area * travel);
+    r.volume_rate.push_back(0.0);
+    r.supply.push_back(plant.supplyPressure());
+    for (int s = 0; s < 4; ++s) plant.step(r.dt / 4, &u, &travel, &rate);
+  }
+  return r;
 }
 
 }  // namespace adroit::pneumatics

@@ -12,32 +12,6 @@
 using namespace adroit::pneumatics;
 
 namespace {
-// Locked cylinder at `travel`, plant sub-stepped at 0.125 ms, recorded at 0.5 ms; no tube delay,
-// no valve spread, no sensor noise. volume = swept volume (the dead volume is unknown).
-Recording record(const CylinderSpec& spec, double travel, const std::string& kind, double seconds,
-                 std::uint64_t seed) {
-  PlantOptions o;
-  o.tube_delay = 0, o.area_spread = 0, o.offset_spread = 0, o.initial_volts = -3.0;
-  PneumaticPlant plant({spec}, SupplyParams{}, 1, o);
-  ExcitationParams e;
-  e.kind = kind;
-  e.seed = seed;
-  e.step_hold = 0.05;
-  Excitation ex(e);
-  Recording r;
-  r.dt = 5e-4;
-  const double rate = 0.0;
-  for (int k = 0; k < static_cast<int>(seconds / r.dt); ++k) {
-    const double u = ex.next(k * r.dt, r.dt);
-    r.volts.push_back(u);
-    r.pressure.push_back(plant.pressure()[0]);
-    r.volume.push_back(spec.bore_area * travel);
-    r.volume_rate.push_back(0.0);
-    r.supply.push_back(plant.supplyPressure());
-    for (int s = 0; s < 4; ++s) plant.step(r.dt / 4, &u, &travel, &rate);
-  }
-  return r;
-}
 
 void expectPortNear(const GompertzArea& got, const GompertzArea& truth, const char* name) {
   EXPECT_NEAR(got.offset, truth.offset, 0.1 * truth.offset) << name;
@@ -58,8 +32,8 @@ TEST(ThinPortId, RecoversValveDeadVolumeAndLeakFromNoiseFreeData) {
   leak_free.leak_area = 0.0;
   std::vector<Recording> valve_data;
   for (double travel : {0.005, 0.015, 0.035}) {
-    valve_data.push_back(record(leak_free, travel, "steps", 1.5, 1));
-    valve_data.push_back(record(leak_free, travel, "random", 1.5, 2));
+    valve_data.push_back(recordLockedCylinder(leak_free, travel, "steps", 1.5, 1));
+    valve_data.push_back(recordLockedCylinder(leak_free, travel, "random", 1.5, 2));
   }
   // Start: the other valve of table 4.4, a dead volume twice too large, no leak.
   ThinPortParams start;
@@ -76,7 +50,7 @@ TEST(ThinPortId, RecoversValveDeadVolumeAndLeakFromNoiseFreeData) {
 
   // The leaky cylinder with that valve: leak orifice (and dead volume again).
   std::vector<Recording> leak_data;
-  for (double travel : {0.005, 0.02}) leak_data.push_back(record(truth, travel, "steps", 1.5, 3));
+  for (double travel : {0.005, 0.02}) leak_data.push_back(recordLockedCylinder(truth, travel, "steps", 1.5, 3));
   ThinPortParams start2 = valve.params;
   start2.leak_area = 1e-8;
   ThinPortFitOptions o2;

@@ -10,6 +10,8 @@
 // low-leak cylinder, then a_l (and v_0) from the leaky cylinder with that valve.
 #pragma once
 
+#include <cstdint>
+#include <string>
 #include <vector>
 
 #include "adroit_pneumatics/plant.h"
@@ -50,5 +52,12 @@ double gompertzCentre(const GompertzArea& g);
 
 // Rate RMSE (Pa/s) of given parameters on recordings (same convention).
 double thinPortRateRmse(const std::vector<Recording>& recordings, const ThinPortParams& params);
+
+// Identification data from the plant model: one cylinder locked at `travel`, driven by the
+// excitation `kind` (excitation.h), sub-stepped at 0.125 ms and recorded at 0.5 ms, noise-free,
+// without tube delay or valve spread. The volume column holds the swept volume only (the
+// dead volume is what the fit identifies).
+Recording recordLockedCylinder(const CylinderSpec& spec, double travel, const std::string& kind, double seconds,
+                               std::uint64_t seed);
 
 }  // namespace adroit::pneumatics

@@ -29,6 +29,24 @@ class Broken : public ScalarDynamics {
 };
 }  // namespace
 
+// Independent finite-horizon LQR on x = [p, w], x' = A x + B u with B = [b, 1] (w holds
+// the command), cost x'Qx + u'Ru + 2 x'N u where Q = diag(ap, aw), R = au + aw, N = [0, -aw]'
+// (the expansion of eq. 5.12 with squared norms); terminal cost ap p^2. Returns u_i = -K_i x.
+static std::vector<Eigen::RowVector2d> lqrGains(const Eigen::Matrix2d& A, double b, const IlqgParams& prm) {
+  const Eigen::Vector2d B(b, 1.0), N(0.0, -prm.alpha_w);
+  const Eigen::Matrix2d Q = Eigen::Vector2d(prm.alpha_p, prm.alpha_w).asDiagonal();
+  const double R = prm.alpha_u + prm.alpha_w;
+  Eigen::Matrix2d P;
+  P << prm.alpha_p, 0, 0, 0;
+  std::vector<Eigen::RowVector2d> K(prm.horizon);
+  for (int i = prm.horizon - 1; i >= 0; --i) {
+    const double S = R + B.dot(P * B);
+    K[i] = (B.transpose() * P * A + N.transpose()) / S;
+    P = Q + A.transpose() * P * A - (A.transpose() * P * B + N) * (B.transpose() * P * A + N.transpose()) / S;
+  }
+  return K;
+}
+
 TEST(Ilqg, LinearQuadraticCaseEqualsLqr) {
   IlqgParams prm;
   prm.horizon = 30;
@@ -40,22 +58,9 @@ TEST(Ilqg, LinearQuadraticCaseEqualsLqr) {
   IlqgSolver solver(prm);
   const double p0 = 0.3, w0 = -0.5;
   ASSERT_TRUE(solver.solve(f, p0, w0, zero.data(), zero.data(), {}, 1));
-  // Independent finite-horizon Riccati recursion for x = [p, w], cost
-  // x'Qx + u'Ru + 2 x'N u with Q = diag(ap, aw), R = au + aw, N = [0, -aw]'.
   Eigen::Matrix2d A;
   A << a, 0, 0, 0;
-  Eigen::Vector2d B(b, 1.0), N(0.0, -prm.alpha_w);
-  Eigen::Matrix2d Q = Eigen::Vector2d(prm.alpha_p, prm.alpha_w).asDiagonal();
-  const double R = prm.alpha_u + prm.alpha_w;
-  Eigen::Matrix2d P;
-  P << prm.alpha_p, 0, 0, 0;
-  std::vector<Eigen::RowVector2d> K(prm.horizon);
-  for (int i = prm.horizon - 1; i >= 0; --i) {
-    const double S = R + B.dot(P * B);
-    const Eigen::RowVector2d L = (B.transpose() * P * A + N.transpose()) / S;
-    K[i] = L;
-    P = Q + A.transpose() * P * A - (A.transpose() * P * B + N) * (B.transpose() * P * A + N.transpose()) / S;
-  }
+  const auto K = lqrGains(A, b, prm);
   Eigen::Vector2d x(p0, w0);
   for (int i = 0; i < prm.horizon; ++i) {
     const double u = -K[i] * x;
@@ -174,20 +179,9 @@ TEST(Ilqg, DeadTimeCaseEqualsLqr) {
   IlqgSolver solver(prm);
   const double p0 = 0.25, w0 = 0.7;
   ASSERT_TRUE(solver.solve(f, p0, w0, zero.data(), zero.data(), {}, 1));
-  // Independent Riccati recursion with A = [[a, c], [0, 0]], B = [b, 1].
-  Eigen::Matrix2d A;
+  Eigen::Matrix2d A;  // the previous command w also moves the pressure (dead time)
   A << a, c, 0, 0;
-  Eigen::Vector2d B(b, 1.0), N(0.0, -prm.alpha_w);
-  Eigen::Matrix2d Q = Eigen::Vector2d(prm.alpha_p, prm.alpha_w).asDiagonal();
-  const double R = prm.alpha_u + prm.alpha_w;
-  Eigen::Matrix2d P;
-  P << prm.alpha_p, 0, 0, 0;
-  std::vector<Eigen::RowVector2d> K(prm.horizon);
-  for (int i = prm.horizon - 1; i >= 0; --i) {
-    const double S = R + B.dot(P * B);
-    K[i] = (B.transpose() * P * A + N.transpose()) / S;
-    P = Q + A.transpose() * P * A - (A.transpose() * P * B + N) * (B.transpose() * P * A + N.transpose()) / S;
-  }
+  const auto K = lqrGains(A, b, prm);
   Eigen::Vector2d x(p0, w0);
   for (int i = 0; i < prm.horizon; ++i) {
     const double u = -K[i] * x;

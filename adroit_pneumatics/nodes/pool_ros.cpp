@@ -111,7 +111,8 @@ class PoolRos {
                      "reference_timeout", "state_timeout", "exhaust_volts", "ilqg", "pidf", "diagnostics_period"});
     p.checkKeys("ilqg", {"horizon", "dt", "alpha_p", "alpha_u", "alpha_w", "u_min", "u_max", "iterations",
                          "feedback_fraction", "solve_every", "disturbance_gain", "disturbance_limit",
-                         "u_des_steady_state"});
+                         "u_des_steady_state", "measurement_gain", "measurement_band", "jump_threshold",
+                         "jump_iterations"});
     p.checkKeys("pidf", {"kp", "ki", "kd", "filter_hz", "feedforward", "u_min", "u_max"});
 
     // Cylinders: the model is the source of names and bores.
@@ -175,6 +176,10 @@ class PoolRos {
     o.ilqg.disturbance_gain = p.number("ilqg/disturbance_gain", o.ilqg.disturbance_gain);
     o.ilqg.disturbance_limit = p.number("ilqg/disturbance_limit", o.ilqg.disturbance_limit);
     o.ilqg.u_des_steady_state = p.boolean("ilqg/u_des_steady_state", o.ilqg.u_des_steady_state);
+    o.ilqg.measurement_gain = p.number("ilqg/measurement_gain", o.ilqg.measurement_gain);
+    o.ilqg.measurement_band = p.number("ilqg/measurement_band", o.ilqg.measurement_band);
+    o.ilqg.jump_threshold = p.number("ilqg/jump_threshold", o.ilqg.jump_threshold);
+    o.ilqg.jump_iterations = p.integer("ilqg/jump_iterations", o.ilqg.jump_iterations);
     o.pidf.kp = p.number("pidf/kp", o.pidf.kp);
     o.pidf.ki = p.number("pidf/ki", o.pidf.ki);
     o.pidf.kd = p.number("pidf/kd", o.pidf.kd);

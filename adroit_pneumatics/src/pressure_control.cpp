@@ -116,12 +116,17 @@ void IlqgParams::validate() const {
   if (!(alpha_w >= 0) || !std::isfinite(alpha_w)) throw std::invalid_argument("ilqg: alpha_w must be >= 0");
   if (!(u_min < u_max) || u_min < -5 || u_max > 5) throw std::invalid_argument("ilqg: need -5 <= u_min < u_max <= 5");
   if (iterations < 1) throw std::invalid_argument("ilqg: iterations must be >= 1");
+  if (jump_iterations < 1) throw std::invalid_argument("ilqg: jump_iterations must be >= 1");
   if (!(feedback_fraction >= 0 && feedback_fraction <= 1))
     throw std::invalid_argument("ilqg: feedback_fraction must be in [0, 1]");
   if (!(disturbance_gain >= 0 && disturbance_gain <= 1))
     throw std::invalid_argument("ilqg: disturbance_gain must be in [0, 1]");
   if (!(measurement_gain > 0 && measurement_gain <= 1))
     throw std::invalid_argument("ilqg: measurement_gain must be in (0, 1]");
+  if (!(jump_threshold >= 0) || !std::isfinite(jump_threshold))
+    throw std::invalid_argument("ilqg: jump_threshold must be finite and >= 0");
+  if (!(measurement_band >= 0) || !std::isfinite(measurement_band))
+    throw std::invalid_argument("ilqg: measurement_band must be finite and >= 0");
   if (!(disturbance_limit >= 0) || !std::isfinite(disturbance_limit))
     throw std::invalid_argument("ilqg: disturbance_limit must be finite and >= 0");
 }
@@ -212,6 +217,38 @@ bool IlqgSolver::backward(const double* p_ref, const double* u_des, double reg, 
   return std::isfinite(dv);
 }
 
+void IlqgSolver::bangHoldGuess(const ScalarDynamics& f, double p0, double w0, const double* p_ref,
+                               std::vector<double>& u) const {
+  const int n = params_.horizon;
+  // Holding command for a pressure level: the u whose step keeps p where it is (the step is
+  // increasing in u), by bisection.
+  auto hold = [&](double level) {
+    double lo = params_.u_min, hi = params_.u_max;
+    for (int k = 0; k < 30; ++k) {
+      const double mid = 0.5 * (lo + hi);
+      (f.stepWithMemory(level, mid, mid, nullptr, nullptr, nullptr) < level ? lo : hi) = mid;
+    }
+    return 0.5 * (lo + hi);
+  };
+  // Holding commands at every 10th sample, interpolated in between (the reference is smooth
+  // between jumps, and a hold command costs a bisection).
+  constexpr int kEvery = 10;
+  std::vector<double> knots;
+  for (int i = 0; i < n + kEvery; i += kEvery) knots.push_back(hold(p_ref[std::min(i, n)]));
+  u.resize(n);
+  const int direction = p_ref[0] > p0 ? 1 : -1;
+  double p = p0, w = w0;
+  bool racing = true;
+  for (int i = 0; i < n; ++i) {
+    racing = racing && (p_ref[i] - p) * direction > 0;
+    const int a = i / kEvery;
+    const double f_i = (i % kEvery) / static_cast<double>(kEvery);
+    u[i] = racing ? (direction > 0 ? params_.u_max : params_.u_min) : knots[a] + f_i * (knots[a + 1] - knots[a]);
+    p = f.stepWithMemory(p, w, u[i], nullptr, nullptr, nullptr);
+    w = u[i];
+  }
+}
+
 bool IlqgSolver::solve(const ScalarDynamics& f, double p0, double w0, const double* p_ref, const double* u_des,
                        const std::vector<double>& u_init, int iterations) {
   const int n = params_.horizon;
@@ -219,6 +256,17 @@ bool IlqgSolver::solve(const ScalarDynamics& f, double p0, double w0, const doub
   for (int i = 0; i < n; ++i) u0[i] = i < static_cast<int>(u_init.size()) ? u_init[i] : u_des[i];
   std::vector<double> p(n + 1), w(n + 1), u(n);
   double cost = rollout(f, p0, w0, p_ref, u_des, u0, -1.0, p, w, u);
+  if (params_.jump_threshold > 0 && std::abs(p_ref[0] - p0) > params_.jump_threshold) {
+    iterations = std::max(iterations, params_.jump_iterations);
+    bangHoldGuess(f, p0, w0, p_ref, u_try_);
+    const double c = rollout(f, p0, w0, p_ref, u_des, u_try_, -1.0, p_try_, w_try_, u_try_);
+    if (std::isfinite(c) && (c < cost || !std::isfinite(cost))) {
+      cost = c;
+      p.swap(p_try_);
+      w.swap(w_try_);
+      u.swap(u_try_);
+    }
+  }
   if (!std::isfinite(cost)) return false;
   p_.swap(p);
   w_.swap(w);
@@ -293,7 +341,10 @@ void IlqgPressureController::updateDisturbance(double t, double p_meas, double w
         const double next = disturbance_ + prm.disturbance_gain * e / dt;
         if (std::isfinite(next)) disturbance_ = std::clamp(next, -prm.disturbance_limit, prm.disturbance_limit);
       }
-      if (std::isfinite(pred)) p_est_ = pred + prm.measurement_gain * e;
+      if (std::isfinite(pred)) {
+        const double inside = prm.measurement_band > 0 ? std::clamp(e, -prm.measurement_band, prm.measurement_band) : e;
+        p_est_ = pred + prm.measurement_gain * inside + (e - inside);
+      }
     } else if (!(dt > 0)) {
       disturbance_ = 0.0;  // time went backwards: start over
     }

@@ -293,19 +293,25 @@ PredictionReport predictionRmse(const Recording& rec, const ParametricModel& mod
   if (len < 1 || len >= rec.size()) return rep;
   double sq = 0, supply = 0;
   std::size_t count = 0;
+  double window_sum = 0;
   for (std::size_t start = 0; start + len < rec.size(); start += len) {
-    double p = rec.pressure[start];
+    double p = rec.pressure[start], window_sq = 0;
     for (std::size_t k = start; k < start + len; ++k) {
       p = model.stepDelayed(p, rec.volts[k > 0 ? k - 1 : 0], rec.volts[k], rec.dt, rec.inputs(k));
       const double e = p - rec.pressure[k + 1];
-      sq += e * e;
+      window_sq += e * e;
       supply += rec.supply[k];
       ++count;
     }
+    sq += window_sq;
+    window_sum += std::sqrt(window_sq / len);
     ++rep.windows;
   }
+  const double range = supply / count - rec.room;
   rep.rmse = std::sqrt(sq / count);
-  rep.percent = 100.0 * rep.rmse / (supply / count - rec.room);
+  rep.percent = 100.0 * rep.rmse / range;
+  rep.window_mean_rmse = window_sum / rep.windows;
+  rep.window_mean_percent = 100.0 * rep.window_mean_rmse / range;
   return rep;
 }
 

@@ -225,3 +225,55 @@ TEST(IlqgController, RejectsBadEstimatorParameters) {
   prm.measurement_gain = 0.0;
   EXPECT_THROW(IlqgPressureController(model(), prm), std::invalid_argument);
 }
+
+TEST(IlqgController, ReferenceJumpStartsAtTheLimit) {
+  // Hold 200 kPa, then the whole future reference jumps to 450 kPa. With the "limit, then
+  // hold" guess the first command after the jump opens the valve to its limit, and the
+  // pressure error over the following 100 ms is no larger than without the guess.
+  const ParametricModel m = model();
+  ParametricInputs in;
+  in.volume = 1e-6;
+  auto run = [&](double threshold, double* first_after_jump) {
+    IlqgParams prm;
+    prm.jump_threshold = threshold;
+    IlqgPressureController c(m, prm);
+    double p = 200e3, w = 0.0, sq = 0;
+    for (int k = 0; k < 100; ++k) {
+      const double target = k < 60 ? 200e3 : 450e3;
+      std::vector<double> ref(101, target);
+      const double u = c.update(k * 0.005, p, w, in, ref.data(), 101, 0.005, nullptr);
+      if (k == 60) *first_after_jump = u;
+      p = m.step(p, u, 0.005, in);
+      w = u;
+      if (k >= 60 && k < 80) sq += (p - target) * (p - target);
+    }
+    return std::sqrt(sq / 20);
+  };
+  double first_with = 0, first_without = 0;
+  const double with = run(0.02, &first_with), without = run(0.0, &first_without);
+  EXPECT_DOUBLE_EQ(first_with, IlqgParams{}.u_max);
+  EXPECT_LE(with, without * 1.001) << "with " << with << " without " << without;
+}
+
+TEST(IlqgController, LargeInnovationIsTakenInFull) {
+  // Sensor noise (a small innovation) is filtered with measurement_gain; an innovation far
+  // beyond measurement_band is model error and the estimate follows it to within the band.
+  const ParametricModel m = model();
+  ParametricInputs in;
+  in.volume = 1e-6;
+  IlqgParams prm;
+  prm.measurement_gain = 0.25, prm.measurement_band = 4000, prm.disturbance_gain = 0.0;
+  IlqgPressureController c(m, prm);
+  std::vector<double> ref(101, 300e3);
+  double p = 300e3, w = 0.0;
+  for (int k = 0; k < 40; ++k) {  // settle on the model itself: innovations are zero
+    w = c.update(k * 0.005, p, w, in, ref.data(), 101, 0.005, nullptr);
+    p = m.stepDelayed(p, w, w, 0.005, in);
+  }
+  const double pred = m.stepDelayed(c.pressureEstimate(), w, w, 0.005, in);
+  c.update(40 * 0.005, pred + 2000.0, w, in, ref.data(), 101, 0.005, nullptr);  // noise-sized
+  EXPECT_NEAR(c.pressureEstimate(), pred + 0.25 * 2000.0, 50.0);
+  const double pred2 = m.stepDelayed(c.pressureEstimate(), w, w, 0.005, in);
+  c.update(41 * 0.005, pred2 + 60e3, w, in, ref.data(), 101, 0.005, nullptr);  // model error
+  EXPECT_NEAR(c.pressureEstimate(), pred2 + 60e3 - 0.75 * 4000.0, 50.0);
+}

@@ -35,6 +35,12 @@ struct IlqgParams {
                                 // time-shifted warm start (real-time iteration; the thesis
                                 // takes "a few" per estimate update, 5.5.4)
   double feedback_fraction = 0.2;  // partial feedback (5.6.3 item 5)
+  // When the pressure is this far (MPa) from the reference at the start of a solve (a jump
+  // of the reference), the solver also tries the time-optimal guess "command limit until the
+  // predicted pressure reaches the reference, then the command that holds it" and starts
+  // from whichever of it and the warm start costs less. 0 disables.
+  double jump_threshold = 0.02;
+  int jump_iterations = 3;      // iterations of a solve that starts far from the reference
   // Offset-free MPC (IlqgPressureController): gain of the disturbance estimate, a constant
   // pressure-rate bias d (Pa/s) added to the model, updated each tick from the one-step
   // prediction error e as d += disturbance_gain * e / dt. 0 turns it off.
@@ -44,6 +50,9 @@ struct IlqgParams {
   // one-step prediction (with d) from the last tick. 1 = the raw measurement; smaller
   // filters sensor noise without the lag of a plain low-pass (the model carries the motion).
   double measurement_gain = 0.25;
+  // Innovations larger than this (Pa) are model error, not sensor noise: the part of the
+  // innovation beyond the band is taken in full. 0 = always measurement_gain.
+  double measurement_band = 4000.0;  // 2 sigma of the pressure sensor noise (table 3.1)
   // u_des of eq. 5.12: false (default) = the previous plan shifted in time (alpha_u is then a
   // pure proximal regulariser that cannot bias the steady state), true = the model's
   // steady-state inverse of the reference (biased whenever the model is).
@@ -83,6 +92,8 @@ class IlqgSolver {
                  const std::vector<double>& u_ff, double step, std::vector<double>& p, std::vector<double>& w,
                  std::vector<double>& u) const;
   bool backward(const double* p_ref, const double* u_des, double reg, double* expected);
+  // The "limit, then hold" initial guess for a reference far from p0 (see jump_threshold).
+  void bangHoldGuess(const ScalarDynamics& f, double p0, double w0, const double* p_ref, std::vector<double>& u) const;
 
   IlqgParams params_;
   std::vector<double> p_, w_, u_, a_, b_, c_, kff_, kp_, kw_;
@@ -118,8 +129,9 @@ class IlqgPressureController : public PressureController {
   const Policy& policy() const { return policy_; }
   // Policy evaluated at time t and state; NaN if no valid policy covers t.
   double evaluate(double t, double p_meas, double w_last) const;
-  // Current disturbance estimate (Pa/s).
+  // Current disturbance estimate (Pa/s) and start-pressure estimate of the last tick (Pa).
   double disturbance() const { return disturbance_; }
+  double pressureEstimate() const { return p_est_; }
 
  private:
   void updateDisturbance(double t, double p_meas, double w_last, const ParametricInputs& in);

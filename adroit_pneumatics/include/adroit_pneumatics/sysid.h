@@ -69,6 +69,8 @@ FitReport fitParametricModel(const Recording& sweep, const Recording& random, bo
 struct PredictionReport {
   double rmse = 0;          // Pa over all windows
   double percent = 0;       // of the working range (mean supply - room)
+  double window_mean_rmse = 0;     // Pa, mean over windows of each window's RMSE (the
+  double window_mean_percent = 0;  // thesis' "mean of prediction error", 4.7)
   int windows = 0;
 };
 

@@ -98,10 +98,14 @@ void SimDriver::fillMarkers() {
     dot.id = static_cast<int>(k);
     dot.type = visualization_msgs::Marker::SPHERE;
     const double force = truth.touch[k];
-    const double size = force > 0.01 ? 0.008 + 0.004 * std::min(5.0, force) : 0.001;
-    dot.scale.x = dot.scale.y = dot.scale.z = size;
-    dot.pose.position = point(d->site_xpos + 3 * site);
-    dot.color = heat(std::min(1.0, force / 5.0), force > 0.01 ? 0.9f : 0.0f);
+    if (force > 0.01) {
+      const double size = 0.008 + 0.004 * std::min(5.0, force);
+      dot.scale.x = dot.scale.y = dot.scale.z = size;
+      dot.pose.position = point(d->site_xpos + 3 * site);
+      dot.color = heat(std::min(1.0, force / 5.0), 0.9f);
+    } else {
+      dot.action = visualization_msgs::Marker::DELETE;  // not a transparent sphere: rviz warns on alpha 0
+    }
     marker_msg_.markers.push_back(dot);
   }
 

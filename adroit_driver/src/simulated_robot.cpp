@@ -13,19 +13,9 @@ constexpr double kExhaustVolts = -5.0;  // safe state: every valve fully open to
 constexpr double kIdleVolts = 0.0;      // valve centred: the command before any controller
 
 // Plant cylinder for a model cylinder: the catalogue entry of its type with the model's
-// bore and stroke. The plant catalogue has no M40 (arm shoulder/elbow): it is built from
-// the M24 with dead volume and leak orifice area scaled by the bore area, the way the
-// catalogue scales M16/M24 from the M9. It keeps the M24's valve: a 40 mm chamber near
-// full stroke therefore exhausts in ~0.5 s, not 200 ms (README, "Plant").
+// bore and stroke.
 pneumatics::CylinderSpec plantSpec(const description::Cylinder& c) {
-  const bool from_m24 = c.type == "M40";
-  pneumatics::CylinderSpec spec = pneumatics::cylinderSpec(from_m24 ? "M24" : c.type);
-  const double area_ratio = (c.bore_diameter * c.bore_diameter) / (spec.bore_diameter * spec.bore_diameter);
-  if (from_m24) {
-    spec.type = c.type;
-    spec.dead_volume *= area_ratio;
-    spec.leak_area *= area_ratio;
-  }
+  pneumatics::CylinderSpec spec = pneumatics::cylinderSpec(c.type);
   spec.bore_diameter = c.bore_diameter;
   spec.bore_area = c.bore_area;
   spec.stroke = c.stroke;

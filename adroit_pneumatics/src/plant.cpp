@@ -85,10 +85,16 @@ CylinderSpec cylinderSpec(const std::string& type) {
                                      kLeakM9 * 16.0 / 9.0, 2);
   if (type == "M24") return makeSpec(type, 0.024, 0.075, 1.0e-7 * (24.0 / 9.0) * (24.0 / 9.0),
                                      kLeakM9 * 24.0 / 9.0, 2);
-  // Arm shoulder/elbow (assumed like the M24: AIRPEL air seal, valve 2, dead volume and
-  // leak scaled with the bore; not thesis data).
-  if (type == "M40") return makeSpec(type, 0.040, 0.100, 1.0e-7 * (40.0 / 9.0) * (40.0 / 9.0),
-                                     kLeakM9 * 40.0 / 9.0, 2);
+  // Arm shoulder/elbow: the thesis drives the shoulder with several M24 units in parallel
+  // (3.8), one valve per cylinder (3.10). The M40 stands for that bundle: bore area
+  // (40/24)^2 = 2.8 M24s, and so valve 2's port areas times the same factor. Dead volume
+  // and leak scale with the bore; the 100 mm stroke is our assumption.
+  if (type == "M40") {
+    CylinderSpec s = makeSpec(type, 0.040, 0.100, 1.0e-7 * (40.0 / 9.0) * (40.0 / 9.0), kLeakM9 * 40.0 / 9.0, 2);
+    constexpr double kUnits = (40.0 / 24.0) * (40.0 / 24.0);
+    for (GompertzArea* port : {&s.valve.inlet, &s.valve.exhaust}) port->offset *= kUnits, port->a *= kUnits;
+    return s;
+  }
   throw std::invalid_argument("cylinderSpec: unknown cylinder type '" + type +
                               "' (known: M9, M16, M24, M40)");
 }

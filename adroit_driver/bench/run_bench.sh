@@ -9,4 +9,4 @@ roscore -p "$port" >/dev/null 2>&1 &
 core=$!
 trap 'kill $core 2>/dev/null || true; wait $core 2>/dev/null || true' EXIT
 for _ in $(seq 50); do rosparam list >/dev/null 2>&1 && break; sleep 0.2; done
-"$(dirname "$(readlink -f "$0")")/driver_bench" "$@" 2>&1 | grep -v "^\[ INFO\]"
+"$(dirname "$(readlink -f "$0")")/driver_bench" "$@" 2>&1 | grep -v "\[ INFO\]"

@@ -12,10 +12,22 @@ constexpr double kTimeEps = 1e-9;
 double quantise(double v, double quantum) { return quantum > 0 ? quantum * std::round(v / quantum) : v; }
 }  // namespace
 
-void DelayLine::push(double time, const std::vector<double>& frame) { frames_.emplace_back(time, frame); }
+void DelayLine::push(double time, const std::vector<double>& frame) {
+  // Reuses the storage of a frame that has left the line: no allocation per step.
+  std::vector<double> storage;
+  if (!spare_.empty()) {
+    storage = std::move(spare_.back());
+    spare_.pop_back();
+  }
+  storage.assign(frame.begin(), frame.end());
+  frames_.emplace_back(time, std::move(storage));
+}
 
 const std::vector<double>& DelayLine::at(double time) {
-  while (frames_.size() >= 2 && frames_[1].first <= time + kTimeEps) frames_.pop_front();
+  while (frames_.size() >= 2 && frames_[1].first <= time + kTimeEps) {
+    spare_.push_back(std::move(frames_.front().second));
+    frames_.pop_front();
+  }
   return frames_.front().second;
 }
 

@@ -4,9 +4,13 @@
 
 #include <boost/make_shared.hpp>
 
+#include <pthread.h>
+#include <sched.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <sstream>
 
 #include <diagnostic_msgs/DiagnosticArray.h>
@@ -107,6 +111,10 @@ DriverParams readParams(const ros::NodeHandle& pnh) {
   p.marker_rate = paramDouble(pnh, "marker_rate", p.marker_rate);
   if (!(p.marker_rate >= 0 && p.marker_rate <= 100))
     throw ParameterError("~marker_rate must be in [0, 100] Hz, got " + std::to_string(p.marker_rate));
+  p.realtime_priority = param<int>(pnh, "realtime_priority", p.realtime_priority, "an integer");
+  if (p.realtime_priority < 0 || p.realtime_priority > 99)
+    throw ParameterError("~realtime_priority must be in [0, 99] (0 = normal scheduling), got " +
+                         std::to_string(p.realtime_priority));
   p.diagnostics_period = paramDouble(pnh, "diagnostics_period", p.diagnostics_period);
   if (!(p.diagnostics_period >= 0.05 && p.diagnostics_period <= 60))
     throw ParameterError("~diagnostics_period must be in [0.05, 60] s, got " + std::to_string(p.diagnostics_period));
@@ -172,24 +180,26 @@ SimDriver::~SimDriver() { stop(); }
 
 void SimDriver::start() {
   if (running_.exchange(true)) return;
-  {
-    std::lock_guard<std::mutex> lock(publish_mutex_);
-    publisher_running_ = true;
+  if (!params_.realtime) {  // real time: the simulation thread publishes
+    {
+      std::lock_guard<std::mutex> lock(publish_mutex_);
+      publisher_running_ = true;
+    }
+    publisher_ = std::thread(&SimDriver::publishLoop, this);
   }
-  publisher_ = std::thread(&SimDriver::publishLoop, this);
   thread_ = std::thread(&SimDriver::loop, this);
 }
 
 void SimDriver::stop() {
   if (!running_.exchange(false)) return;
   control_cv_.notify_all();
-  publish_cv_.notify_all();  // a simulation thread waiting for queue space must see the stop
+  published_cv_.notify_all();  // a simulation thread waiting for queue space must see the stop
   if (thread_.joinable()) thread_.join();
   {
     std::lock_guard<std::mutex> lock(publish_mutex_);
     publisher_running_ = false;  // the publisher drains what is queued, then ends
   }
-  publish_cv_.notify_all();
+  work_cv_.notify_all();
   if (publisher_.joinable()) publisher_.join();
 }
 
@@ -201,27 +211,60 @@ ros::Time SimDriver::stamp() const {
 
 // ---------------------------------------------------------------------------- loop
 
+bool SimDriver::enterRealtimeScheduling() {
+  sched_param sp{};
+  sp.sched_priority = params_.realtime_priority;
+  const int error = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
+  if (error != 0) {
+    ROS_WARN("adroit_sim: ~realtime_priority %d: SCHED_FIFO not permitted (%s); stepping with normal scheduling "
+             "(grant an rtprio limit or CAP_SYS_NICE, or set ~realtime_priority: 0)",
+             params_.realtime_priority, std::strerror(error));
+    return false;
+  }
+  fifo_priority_ = params_.realtime_priority;
+  ROS_INFO("adroit_sim: simulation thread under SCHED_FIFO, priority %d", params_.realtime_priority);
+  return true;
+}
+
+void SimDriver::leaveRealtimeScheduling(const char* why) {
+  sched_param sp{};
+  pthread_setschedparam(pthread_self(), SCHED_OTHER, &sp);
+  fifo_priority_ = 0;
+  ROS_WARN("adroit_sim: leaving SCHED_FIFO: %s", why);
+}
+
 void SimDriver::loop() {
   const double dt = params_.sim.timestep;
   // Real time: state k is published at origin + k dt (wall); computing it happens before.
   auto origin = SteadyClock::now();
   double origin_clock = 0;
   bool resync = true;
+  // A SCHED_FIFO thread that never sleeps would starve its core: after this many deadlines
+  // missed in a row (the machine cannot step this scene in real time) it returns to normal
+  // scheduling.
+  constexpr int kMaxMissedInRow = 250;
+  bool fifo = params_.realtime && params_.realtime_priority > 0 && enterRealtimeScheduling();
+  int missed_in_row = 0;
   while (running_) {
-    bool requested = false, publish_now = false;
+    bool requested = false, last_requested = false, publish_now = false;
     {
       std::unique_lock<std::mutex> lock(control_mutex_);
       publish_now = publish_now_;
       publish_now_ = false;
       if (paused_ && pending_steps_ == 0 && !publish_now) {
-        control_cv_.wait_for(lock, std::chrono::milliseconds(50));
+        lock.unlock();
+        flushPublication();  // nothing follows for a while: what is held goes out now
+        lock.lock();
+        if (paused_ && pending_steps_ == 0 && !publish_now_) control_cv_.wait_for(lock, std::chrono::milliseconds(50));
         resync = true;
+        missed_in_row = 0;
         continue;
       }
       requested = paused_ && pending_steps_ > 0;
+      last_requested = requested && pending_steps_ == 1;
     }
     if (publish_now) {
-      publishDue(true, wallSeconds());
+      publishDue(true, wallSeconds(), true);
       continue;
     }
     const auto compute_start = SteadyClock::now();
@@ -239,6 +282,7 @@ void SimDriver::loop() {
       steps_done_.store(robot_->counters().steps, std::memory_order_relaxed);
     }
     const auto compute_end = SteadyClock::now();
+    double lateness = -1;  // publication after the deadline (s), real time on schedule
     if (params_.realtime && !requested) {
       auto deadline = origin + std::chrono::duration_cast<SteadyClock::duration>(
                                    std::chrono::duration<double>(clock_after - origin_clock - dt));
@@ -253,18 +297,26 @@ void SimDriver::loop() {
         std::lock_guard<std::mutex> lock(stats_mutex_);
         ++deadline_misses_;
       } else {
+        missed_in_row = -1;
         std::this_thread::sleep_until(deadline);
       }
-      if (!resync) {
-        std::lock_guard<std::mutex> lock(stats_mutex_);
-        lateness_.add(std::max(0.0, std::chrono::duration<double>(SteadyClock::now() - deadline).count()));
+      if (++missed_in_row >= kMaxMissedInRow && fifo) {
+        leaveRealtimeScheduling(("the simulation cannot keep real time (" + std::to_string(kMaxMissedInRow) +
+                                 " deadlines missed in a row)").c_str());
+        fifo = false;
       }
+      if (!resync) lateness = std::max(0.0, std::chrono::duration<double>(SteadyClock::now() - deadline).count());
     }
+    // Real time: every state goes out at its deadline, from this thread. Lockstep: the
+    // publisher is woken for a few steps at a time (see publishDue), and at once after the
+    // last requested step.
+    const double step_seconds = std::chrono::duration<double>(compute_end - compute_start).count();
+    publishDue(false, wallSeconds(), params_.realtime || last_requested, step_seconds);
     {
       std::lock_guard<std::mutex> lock(stats_mutex_);
-      step_time_.add(std::chrono::duration<double>(compute_end - compute_start).count());
+      step_time_.add(step_seconds);
+      if (lateness >= 0) lateness_.add(lateness);
     }
-    publishDue(false, wallSeconds());
     if (requested) {
       std::lock_guard<std::mutex> lock(control_mutex_);
       if (pending_steps_ > 0 && --pending_steps_ == 0) control_cv_.notify_all();
@@ -272,11 +324,13 @@ void SimDriver::loop() {
   }
 }
 
-void SimDriver::publishDue(bool all, double wall_now) {
+void SimDriver::publishDue(bool all, double wall_now, bool flush, double next_batch_in) {
   std::uint64_t slot_index;
   {
     std::unique_lock<std::mutex> lock(publish_mutex_);
-    publish_cv_.wait(lock, [this] { return queued_batches_ - published_batches_ < kRingSize || !running_; });
+    if (queued_batches_ - published_batches_ >= kRingSize && (publisher_idle_ || publisher_polling_))
+      work_cv_.notify_one();  // (cannot happen: it was woken at half full)
+    published_cv_.wait(lock, [this] { return queued_batches_ - published_batches_ < kRingSize || !running_; });
     if (!running_ && !all) return;
     slot_index = queued_batches_;
   }
@@ -306,14 +360,37 @@ void SimDriver::publishDue(bool all, double wall_now) {
       batch.markers = boost::make_shared<visualization_msgs::MarkerArray>(marker_msg_);
     }
   }
-  bool wake;
+  bool wake = false;
   {
     std::lock_guard<std::mutex> lock(publish_mutex_);
     ++queued_batches_;
-    wake = publisher_idle_;  // waking a thread costs microseconds: only when it sleeps
+    // Lockstep: waking the publisher costs more than handing it a batch (a futex wake-up, an
+    // IPI on a VM, and roscpp's poll and /clock threads woken in turn for every batch); see
+    // kPollPeriod for when it is woken. The order of the batches does not change.
+    if (publisher_idle_) {
+      if (held_batches_++ == 0) held_since_ = wall_now;
+      wake = flush || held_batches_ >= kWakeEvery || wall_now + next_batch_in - held_since_ >= kMaxHold;
+      if (wake) held_batches_ = 0;
+    } else if (publisher_polling_) {
+      wake = flush || queued_batches_ - published_batches_ >= kRingSize / 2;
+    }
   }
-  if (wake) publish_cv_.notify_all();
+  if (params_.realtime) {
+    publishQueued();
+  } else if (wake) {
+    work_cv_.notify_one();
+  }
   publishSafeStateIfChanged();
+}
+
+void SimDriver::flushPublication() {
+  bool wake;
+  {
+    std::lock_guard<std::mutex> lock(publish_mutex_);
+    wake = (publisher_idle_ || publisher_polling_) && queued_batches_ > published_batches_;
+    held_batches_ = 0;
+  }
+  if (wake) work_cv_.notify_one();
 }
 
 std::uint64_t SimDriver::queuedBatches() {
@@ -324,7 +401,7 @@ std::uint64_t SimDriver::queuedBatches() {
 void SimDriver::waitForPublication(std::uint64_t batches) {
   // Bounded wait: a stopping driver must not hang the service thread.
   std::unique_lock<std::mutex> lock(publish_mutex_);
-  publish_cv_.wait_for(lock, std::chrono::seconds(2),
+  published_cv_.wait_for(lock, std::chrono::seconds(2),
                        [&] { return published_batches_ >= batches || !running_; });
 }
 
@@ -342,32 +419,54 @@ void SimDriver::republishAndWait() {
 }
 
 void SimDriver::publishLoop() {
+  bool streaming = false;  // batches keep coming: look again by itself
   for (;;) {
-    std::uint64_t first, end;
     {
       std::unique_lock<std::mutex> lock(publish_mutex_);
-      publisher_idle_ = true;
-      publish_cv_.wait(lock, [this] { return published_batches_ < queued_batches_ || !publisher_running_; });
-      publisher_idle_ = false;
+      const auto ready = [this] { return published_batches_ < queued_batches_ || !publisher_running_; };
+      if (streaming && !ready()) {
+        publisher_polling_ = true;
+        streaming = work_cv_.wait_for(lock, kPollPeriod, ready);
+        publisher_polling_ = false;
+      }
+      if (!ready()) {  // nothing for a poll period: sleep until woken
+        publisher_idle_ = true;
+        held_batches_ = 0;
+        work_cv_.wait(lock, ready);
+        publisher_idle_ = false;
+      }
       if (published_batches_ == queued_batches_) return;  // stopping and drained
-      first = published_batches_;
-      end = queued_batches_;  // everything queued: one wake-up for many steps
     }
-    for (std::uint64_t i = first; i < end; ++i) publishBatch(ring_[i % kRingSize]);
-    {
-      std::lock_guard<std::mutex> lock(publish_mutex_);
-      published_batches_ = end;
-    }
-    publish_cv_.notify_all();  // room for the simulation thread; services waiting for a republish
+    publishQueued();
+    streaming = true;
   }
+}
+
+void SimDriver::publishQueued() {
+  std::uint64_t first, end;
+  {
+    std::lock_guard<std::mutex> lock(publish_mutex_);
+    first = published_batches_;
+    end = queued_batches_;  // everything queued: one wake-up for many steps
+  }
+  if (first == end) return;
+  for (std::uint64_t i = first; i < end; ++i) publishBatch(ring_[i % kRingSize]);
+  {
+    std::lock_guard<std::mutex> lock(publish_mutex_);
+    published_batches_ = end;
+  }
+  published_cv_.notify_all();  // room for the simulation thread; services waiting for a republish
 }
 
 void SimDriver::publishBatch(const Batch& batch) {
   fillMessages(batch);
   // /clock first, so that a stamp never arrives ahead of the clock it refers to.
   if (batch.clock) {
-    rosgraph_msgs::Clock clock;
-    clock.clock = ros::Time(batch.sim_clock);
+    // By shared pointer: this node's own /clock subscription (roscpp subscribes every node
+    // to /clock under /use_sim_time) then gets the message directly, instead of through a
+    // serialisation and a wake-up of roscpp's poll thread for every step.
+    auto clock = boost::make_shared<rosgraph_msgs::Clock>();
+    clock->clock = ros::Time(batch.sim_clock);
     clock_pub_.publish(clock);
   }
   if (batch.joints) {
@@ -610,9 +709,10 @@ void SimDriver::onDiagnostics(const ros::WallTimerEvent&) {
   }
   const double wall = wallSeconds();
   double rtf = 0, steps_per_second = 0;
-  Summary step_time, lateness;
+  SampleStats step_samples, lateness_samples;
   std::uint64_t misses, resyncs;
   {
+    // Only swaps under the lock: the simulation thread takes it every step.
     std::lock_guard<std::mutex> lock(stats_mutex_);
     if (window_wall_ > 0 && wall > window_wall_) {
       rtf = (clock - window_clock_) / (wall - window_wall_);
@@ -621,13 +721,12 @@ void SimDriver::onDiagnostics(const ros::WallTimerEvent&) {
     window_wall_ = wall;
     window_clock_ = clock;
     window_steps_ = counters.steps;
-    step_time = step_time_.summary();
-    lateness = lateness_.summary();
-    step_time_.clear();
-    lateness_.clear();
+    std::swap(step_samples, step_time_);
+    std::swap(lateness_samples, lateness_);
     misses = deadline_misses_;
     resyncs = resyncs_;
   }
+  const Summary step_time = step_samples.summary(), lateness = lateness_samples.summary();
   add("mode", modeName(params_.sim.mode));
   add("time_mode", params_.realtime ? "realtime" : "lockstep");
   add("paused", boolText(paused));
@@ -638,6 +737,8 @@ void SimDriver::onDiagnostics(const ros::WallTimerEvent&) {
   add("step_time", formatSummary(step_time, 1e6, "us"));
   add("publication_lateness", formatSummary(lateness, 1e6, "us"));
   add("deadline_misses", std::to_string(misses));
+  const int fifo = fifo_priority_;
+  add("realtime_scheduling", fifo > 0 ? "SCHED_FIFO " + std::to_string(fifo) : "normal");
   add("schedule_resyncs", std::to_string(resyncs));
   add("safe_state", boolText(safety.safe_state));
   add("estop_latched", boolText(safety.estop_latched));

@@ -44,6 +44,7 @@ class Params(unittest.TestCase):
         self.check("bad_rate", ["_joint_state_rate:=300.0"], "~joint_state_rate")
         self.check("bad_lockstep", ["_realtime:=false"], "~realtime", "/use_sim_time")
         self.check("bad_type", ["_timestep:=fast"], "~timestep")
+        self.check("bad_priority", ["_realtime_priority:=120"], "~realtime_priority", "[0, 99]")
 
 
 if __name__ == "__main__":

@@ -43,6 +43,7 @@ class DelayLine {
 
  private:
   std::deque<std::pair<double, std::vector<double>>> frames_;
+  std::vector<std::vector<double>> spare_;  // storage of frames that have left the line
 };
 
 class SensorPipeline {

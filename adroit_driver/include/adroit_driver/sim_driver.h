@@ -51,6 +51,10 @@ struct DriverParams {
   double marker_rate = 20;         // wall Hz, only while someone listens
   double diagnostics_period = 1.0;  // wall s
   double max_lag = 0.1;            // s behind schedule before real time re-synchronises
+  // Real time only: SCHED_FIFO priority of the simulation thread (which steps and publishes),
+  // 0 = normal scheduling. Falls back to normal scheduling, with a warning, when the system
+  // does not permit it.
+  int realtime_priority = 20;
 };
 
 // Reads and validates ~parameters. Throws ParameterError (unknown scene, bad value...).
@@ -71,10 +75,13 @@ class SimDriver {
   std::uint64_t steps();
 
  private:
-  // What is due after one step, handed from the simulation thread to the publisher thread:
-  // building, serialising and sending the messages costs about as much as a physics step,
-  // so it runs on the other core. Slots live in a ring and are reused, so handing a step
-  // over copies a few hundred numbers and allocates nothing.
+  // What is due after one step. Lockstep: handed from the simulation thread to the
+  // publisher thread, since building, serialising and sending the messages costs about as
+  // much as a physics step, so it runs on the other core. Real time: the simulation thread
+  // publishes it itself at the state's deadline; a hand-over would put a second thread
+  // wake-up (tens of microseconds, millisecond tails on a VM) into every 2 ms period. Slots
+  // live in a ring and are reused, so handing a step over copies a few hundred numbers and
+  // allocates nothing.
   struct Batch {
     bool all = false;  // an explicit republish (after reset / set pose), not a step
     bool clock = false, joints = false, actuators = false, touch = false, object = false;
@@ -86,8 +93,19 @@ class SimDriver {
   };
 
   void loop();
-  void publishLoop();
-  void publishDue(bool all, double wall_now);
+  void publishLoop();  // the publisher thread (lockstep only)
+  // Publishes every queued batch in order. Called by one thread only: the publisher thread
+  // in lockstep, the simulation thread in real time.
+  void publishQueued();
+  // Queues what is due after a step (all: an explicit republish) and, in real time,
+  // publishes it. Lockstep: flush wakes the publisher now rather than after a few more
+  // steps; next_batch_in: wall s until the next batch.
+  void publishDue(bool all, double wall_now, bool flush, double next_batch_in = 0);
+  void flushPublication();  // lockstep: wakes the publisher for whatever is queued
+  // Real time: the simulation thread under SCHED_FIFO (~realtime_priority); false and one
+  // warning when not permitted.
+  bool enterRealtimeScheduling();
+  void leaveRealtimeScheduling(const char* why);
   void publishBatch(const Batch& batch);
   // After reset / set object pose: publish the new state now and wait until it is sent.
   void republishAndWait();
@@ -144,18 +162,36 @@ class SimDriver {
   // Steps simulated so far, readable without the robot lock (a poller must not stall the
   // simulation thread).
   std::atomic<std::uint64_t> steps_done_{0};
+  std::atomic<int> fifo_priority_{0};  // of the simulation thread now (0 = normal scheduling)
   std::thread thread_;
 
   // Publication ring: slots [published_batches_, queued_batches_) wait for the publisher;
   // the counters are guarded by publish_mutex_. Bounded: when the publisher falls behind
   // the simulation waits, so no state is dropped and memory stays bounded.
   static constexpr std::size_t kRingSize = 64;
+  // Lockstep. Waking a sleeping thread costs the waker a futex wake-up and an IPI: about
+  // 50 us of CPU on the development VM (nested KVM), a quarter of an arm-hand step if done
+  // every step, plus roscpp's threads woken in turn. So: while batches keep coming, the
+  // publisher looks for them by itself every kPollPeriod (a timer on its own core) and the
+  // simulation thread wakes nobody; a publisher that found nothing for a period sleeps
+  // until it is woken, once kWakeEvery batches are held or the oldest would be held longer
+  // than kMaxHold (wall s). Either way it is woken at once after the last step of a /step
+  // request, before the simulation thread waits, for a republish, and when the ring is
+  // half full. Real time publishes from the simulation thread (see Batch).
+  static constexpr std::chrono::microseconds kPollPeriod{1000};
+  static constexpr std::uint64_t kWakeEvery = 8;
+  static constexpr double kMaxHold = 1e-3;
+  static_assert(kWakeEvery < kRingSize, "a full ring must have woken the publisher");
   std::mutex publish_mutex_;
-  std::condition_variable publish_cv_;
+  std::condition_variable work_cv_;       // the publisher waits for batches
+  std::condition_variable published_cv_;  // the simulation thread / services wait for publication
   std::vector<Batch> ring_ = std::vector<Batch>(kRingSize);
   bool publisher_running_ = false;
-  bool publisher_idle_ = false;  // the publisher waits for work (needs a wake-up)
+  bool publisher_idle_ = false;     // the publisher waits for work (needs a wake-up)
+  bool publisher_polling_ = false;  // the publisher looks again within kPollPeriod by itself
   std::uint64_t queued_batches_ = 0, published_batches_ = 0;
+  std::uint64_t held_batches_ = 0;  // queued since the publisher went idle, not yet signalled
+  double held_since_ = 0;           // wall s, when the first of them was queued
   std::thread publisher_;
 
   // Statistics, guarded by stats_mutex_.

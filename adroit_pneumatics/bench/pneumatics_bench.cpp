@@ -598,6 +598,12 @@ int main(int argc, char** argv) {
         std::printf("  %-10s %12.2f %12.2f %9.2f %9.2f %7.2f\n", pr.name.c_str(), a.rmse / 1e3, b.rmse / 1e3,
                     a.lag * 1e3, b.lag * 1e3, a.rmse / b.rmse);
         if (!pr.future_known) {
+          IlqgParams jp = ip;  // the jump handling the pools leave off (README)
+          jp.jump_threshold = 0.02, jp.measurement_band = 4000.0;
+          IlqgPressureController jumpy(model, jp);
+          const Tracking j = track(jumpy, rig, pr, seconds, 100);
+          std::printf("  %-10s %12.2f  iLQG with jump handling on (jump_threshold 20 kPa, measurement_band 4 kPa;"
+                      " ratio %.2f, lag %.2f ms)\n", "", j.rmse / 1e3, j.rmse / b.rmse, j.lag * 1e3);
           const double floor = stepFloorRmse(rig, pr, seconds, model, best_pid, g_limit);
           std::printf("  %-10s %12.2f  floor: any controller within +-%.1f V, jump seen when it happens, oracle stop"
                       " (floor / PIDF %.2f)\n", "", floor / 1e3, g_limit, floor / b.rmse);

@@ -39,7 +39,7 @@ struct IlqgParams {
   // of the reference), the solver also tries the time-optimal guess "command limit until the
   // predicted pressure reaches the reference, then the command that holds it" and starts
   // from whichever of it and the warm start costs less. 0 disables.
-  double jump_threshold = 0.02;
+  double jump_threshold = 0.0;  // off by default (see config/pools.yaml)
   int jump_iterations = 3;      // iterations of a solve that starts far from the reference
   // Offset-free MPC (IlqgPressureController): gain of the disturbance estimate, a constant
   // pressure-rate bias d (Pa/s) added to the model, updated each tick from the one-step
@@ -52,7 +52,7 @@ struct IlqgParams {
   double measurement_gain = 0.25;
   // Innovations larger than this (Pa) are model error, not sensor noise: the part of the
   // innovation beyond the band is taken in full. 0 = always measurement_gain.
-  double measurement_band = 4000.0;  // 2 sigma of the pressure sensor noise (table 3.1)
+  double measurement_band = 0.0;  // off by default; 4000 = 2 sigma of the sensor noise
   // u_des of eq. 5.12: false (default) = the previous plan shifted in time (alpha_u is then a
   // pure proximal regulariser that cannot bias the steady state), true = the model's
   // steady-state inverse of the reference (biased whenever the model is).

@@ -253,7 +253,7 @@ void SimDriver::loop() {
       publish_now_ = false;
       if (paused_ && pending_steps_ == 0 && !publish_now) {
         lock.unlock();
-        flushPublication();  // nothing follows for a while: what is held goes out now
+        flushPublication();  // nothing follows for a while: what is queued goes out now
         lock.lock();
         if (paused_ && pending_steps_ == 0 && !publish_now_) control_cv_.wait_for(lock, std::chrono::milliseconds(50));
         resync = true;
@@ -311,7 +311,7 @@ void SimDriver::loop() {
     // publisher is woken for a few steps at a time (see publishDue), and at once after the
     // last requested step.
     const double step_seconds = std::chrono::duration<double>(compute_end - compute_start).count();
-    publishDue(false, wallSeconds(), params_.realtime || last_requested, step_seconds);
+    publishDue(false, wallSeconds(), params_.realtime || last_requested);
     {
       std::lock_guard<std::mutex> lock(stats_mutex_);
       step_time_.add(step_seconds);
@@ -324,12 +324,10 @@ void SimDriver::loop() {
   }
 }
 
-void SimDriver::publishDue(bool all, double wall_now, bool flush, double next_batch_in) {
+void SimDriver::publishDue(bool all, double wall_now, bool flush) {
   std::uint64_t slot_index;
   {
     std::unique_lock<std::mutex> lock(publish_mutex_);
-    if (queued_batches_ - published_batches_ >= kRingSize && (publisher_idle_ || publisher_polling_))
-      work_cv_.notify_one();  // (cannot happen: it was woken at half full)
     published_cv_.wait(lock, [this] { return queued_batches_ - published_batches_ < kRingSize || !running_; });
     if (!running_ && !all) return;
     slot_index = queued_batches_;
@@ -365,15 +363,10 @@ void SimDriver::publishDue(bool all, double wall_now, bool flush, double next_ba
     std::lock_guard<std::mutex> lock(publish_mutex_);
     ++queued_batches_;
     // Lockstep: waking the publisher costs more than handing it a batch (a futex wake-up, an
-    // IPI on a VM, and roscpp's poll and /clock threads woken in turn for every batch); see
-    // kPollPeriod for when it is woken. The order of the batches does not change.
-    if (publisher_idle_) {
-      if (held_batches_++ == 0) held_since_ = wall_now;
-      wake = flush || held_batches_ >= kWakeEvery || wall_now + next_batch_in - held_since_ >= kMaxHold;
-      if (wake) held_batches_ = 0;
-    } else if (publisher_polling_) {
-      wake = flush || queued_batches_ - published_batches_ >= kRingSize / 2;
-    }
+    // IPI on a VM, and roscpp's poll and /clock threads woken in turn); a polling publisher
+    // finds the batch by itself (see kPollPeriod). The order of the batches does not change.
+    wake = publisher_idle_ ||
+           (publisher_polling_ && (flush || queued_batches_ - published_batches_ >= kRingSize / 2));
   }
   if (params_.realtime) {
     publishQueued();
@@ -388,7 +381,6 @@ void SimDriver::flushPublication() {
   {
     std::lock_guard<std::mutex> lock(publish_mutex_);
     wake = (publisher_idle_ || publisher_polling_) && queued_batches_ > published_batches_;
-    held_batches_ = 0;
   }
   if (wake) work_cv_.notify_one();
 }
@@ -431,7 +423,6 @@ void SimDriver::publishLoop() {
       }
       if (!ready()) {  // nothing for a poll period: sleep until woken
         publisher_idle_ = true;
-        held_batches_ = 0;
         work_cv_.wait(lock, ready);
         publisher_idle_ = false;
       }

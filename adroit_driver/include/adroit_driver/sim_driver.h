@@ -98,9 +98,8 @@ class SimDriver {
   // in lockstep, the simulation thread in real time.
   void publishQueued();
   // Queues what is due after a step (all: an explicit republish) and, in real time,
-  // publishes it. Lockstep: flush wakes the publisher now rather than after a few more
-  // steps; next_batch_in: wall s until the next batch.
-  void publishDue(bool all, double wall_now, bool flush, double next_batch_in = 0);
+  // publishes it. Lockstep: flush wakes a polling publisher now rather than at its next look.
+  void publishDue(bool all, double wall_now, bool flush);
   void flushPublication();  // lockstep: wakes the publisher for whatever is queued
   // Real time: the simulation thread under SCHED_FIFO (~realtime_priority); false and one
   // warning when not permitted.
@@ -174,14 +173,10 @@ class SimDriver {
   // every step, plus roscpp's threads woken in turn. So: while batches keep coming, the
   // publisher looks for them by itself every kPollPeriod (a timer on its own core) and the
   // simulation thread wakes nobody; a publisher that found nothing for a period sleeps
-  // until it is woken, once kWakeEvery batches are held or the oldest would be held longer
-  // than kMaxHold (wall s). Either way it is woken at once after the last step of a /step
-  // request, before the simulation thread waits, for a republish, and when the ring is
-  // half full. Real time publishes from the simulation thread (see Batch).
+  // and is woken by the next batch. A polling publisher is woken at once after the last
+  // step of a /step request, before the simulation thread waits, for a republish, and when
+  // the ring is half full. Real time publishes from the simulation thread (see Batch).
   static constexpr std::chrono::microseconds kPollPeriod{1000};
-  static constexpr std::uint64_t kWakeEvery = 8;
-  static constexpr double kMaxHold = 1e-3;
-  static_assert(kWakeEvery < kRingSize, "a full ring must have woken the publisher");
   std::mutex publish_mutex_;
   std::condition_variable work_cv_;       // the publisher waits for batches
   std::condition_variable published_cv_;  // the simulation thread / services wait for publication
@@ -190,8 +185,6 @@ class SimDriver {
   bool publisher_idle_ = false;     // the publisher waits for work (needs a wake-up)
   bool publisher_polling_ = false;  // the publisher looks again within kPollPeriod by itself
   std::uint64_t queued_batches_ = 0, published_batches_ = 0;
-  std::uint64_t held_batches_ = 0;  // queued since the publisher went idle, not yet signalled
-  double held_since_ = 0;           // wall s, when the first of them was queued
   std::thread publisher_;
 
   // Statistics, guarded by stats_mutex_.

@@ -503,13 +503,14 @@ int main(int argc, char** argv) {
     adroit::Stopwatch fit_watch;
     FitOptions airpel_opt;
     airpel_opt.fit_volume = true;
-    const FitReport fit_airpel = fitParametricModel(record({"", true, false, 11}, "sweep", 40, 1),
-                                                    record(airpel, "random", id_s, 2), airpel_opt);
+    // Identification data of the M9: a slow sweep (leaky, not moving) and random commands
+    // (leaky, moving), recorded once for every fit below.
+    const Recording sweep = record({"", true, false, 11}, "sweep", 40, 1), train = record(airpel, "random", id_s, 2);
+    const FitReport fit_airpel = fitParametricModel(sweep, train, airpel_opt);
     const double airpel_fit_s = fit_watch.elapsed();
     FitOptions plain;  // the previous procedure: eq. 5.5 without dead time, one start, short segments
     plain.fit_volume = true, plain.fit_dead_time = false, plain.multi_start = false, plain.long_segment = 0;
-    const FitReport fit_plain = fitParametricModel(record({"", true, false, 11}, "sweep", 40, 1),
-                                                   record(airpel, "random", id_s, 2), plain);
+    const FitReport fit_plain = fitParametricModel(sweep, train, plain);
     const Recording test_airpel = record(airpel, "random", 40, 9);
     const PredictionReport pred = predictionRmse(test_airpel, ParametricModel(fit_airpel.params));
     const PredictionReport pred_plain = predictionRmse(test_airpel, ParametricModel(fit_plain.params));
@@ -537,7 +538,6 @@ int main(int argc, char** argv) {
     {
       std::mt19937_64 rng(5);
       std::lognormal_distribution<double> factor(0.0, 0.6);
-      const Recording sweep = record({"", true, false, 11}, "sweep", 40, 1), train = record(airpel, "random", id_s, 2);
       FitOptions o;
       o.fit_volume = true, o.multi_start = false, o.long_segment = static_cast<int>(2.0 / kTick);
       double best = 1e300, worst = 0;

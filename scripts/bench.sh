@@ -17,6 +17,7 @@ run() {
   echo
 }
 : > "$WS_ROOT/log/bench/all.txt"
+run rosrun adroit_core noise_bench
 run rosrun adroit_description scene_report --testspeed --seconds 10
 run rosrun adroit_pneumatics pneumatics_bench
 run rosrun adroit_driver run_bench.sh ball 5 10

@@ -38,7 +38,7 @@ SensorPipeline::SensorPipeline(const SensorRealism& params, ActuationMode mode, 
       bore_area_(std::move(bore_area)),
       atmospheric_pressure_(atmospheric_pressure),
       min_tension_(min_tension),
-      rng_(params.seed),
+      noise_(params.seed),
       cylinder_model_(bore_area_.size(), params.cylinder, params.seed + 2) {}
 
 void SensorPipeline::restart(double now, const Signals& truth) {
@@ -46,7 +46,7 @@ void SensorPipeline::restart(double now, const Signals& truth) {
   cylinders_.clear();
   touch_.clear();
   object_.clear();
-  if (params_.enabled) cylinder_model_ = pneumatics::SensorModel(bore_area_.size(), params_.cylinder, rng_());
+  if (params_.enabled) cylinder_model_ = pneumatics::SensorModel(bore_area_.size(), params_.cylinder, noise_.bits());
   next_joint_sample_ = now;
   sampleJoints(now, truth);
   sampleCylinders(now, 0.0, truth, true);

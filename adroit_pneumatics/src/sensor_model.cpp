@@ -10,14 +10,14 @@ constexpr double kTwoPi = 6.283185307179586;
 }
 
 SensorModel::SensorModel(std::size_t cylinders, const SensorParams& params, std::uint64_t seed)
-    : params_(params), rng_(seed), pressure_(cylinders, 0.0), length_(cylinders, 0.0) {
+    : params_(params), noise_(seed), pressure_(cylinders, 0.0), length_(cylinders, 0.0) {
   if (!(params.pressure_noise_std >= 0) || !(params.length_noise_std >= 0) || !(params.pressure_quantum >= 0) ||
       !(params.length_quantum >= 0) || !(params.pressure_cutoff_hz > 0) || !(params.length_cutoff_hz > 0))
     throw std::invalid_argument("SensorModel: noise and quantum must be >= 0, cutoffs > 0");
 }
 
 double SensorModel::measure(double value, double noise_std, double quantum) {
-  double v = value + (noise_std > 0 ? noise_std * unit_(rng_) : 0.0);
+  double v = value + (noise_std > 0 ? noise_std * noise_() : 0.0);
   if (quantum > 0) v = quantum * std::round(v / quantum);
   return v;
 }

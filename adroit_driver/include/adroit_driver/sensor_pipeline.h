@@ -6,10 +6,10 @@
 
 #include <array>
 #include <deque>
-#include <random>
 #include <utility>
 #include <vector>
 
+#include "adroit_core/normal_noise.h"
 #include "adroit_driver/sim_config.h"
 #include "adroit_pneumatics/sensor_model.h"
 
@@ -70,15 +70,14 @@ class SensorPipeline {
   void sampleCylinders(double now, double dt, const Signals& truth, bool first);
   void sampleTouchAndObject(double now, const Signals& truth);
   void readDelayed(double now);
-  double noise(double std) { return std > 0 ? std * unit_(rng_) : 0.0; }
+  double noise(double std) { return std > 0 ? std * noise_() : 0.0; }
 
   SensorRealism params_;
   ActuationMode mode_ = ActuationMode::kPneumatic;
   std::vector<double> bore_area_;
   double atmospheric_pressure_ = 0;
   double min_tension_ = 0;
-  std::mt19937_64 rng_;
-  std::normal_distribution<double> unit_{0.0, 1.0};
+  NormalNoise noise_;
   pneumatics::SensorModel cylinder_model_{1};
   double next_joint_sample_ = 0;
   std::vector<double> previous_length_;  // filtered, for the length rate

@@ -4,8 +4,9 @@
 #pragma once
 
 #include <cstdint>
-#include <random>
 #include <vector>
+
+#include "adroit_core/normal_noise.h"
 
 namespace adroit::pneumatics {
 
@@ -35,8 +36,7 @@ class SensorModel {
  private:
   double measure(double value, double noise_std, double quantum);
   SensorParams params_;
-  std::mt19937_64 rng_;
-  std::normal_distribution<double> unit_{0.0, 1.0};
+  NormalNoise noise_;
   bool initialised_ = false;
   std::vector<double> pressure_, length_;
 };

@@ -149,6 +149,18 @@ double otherProcessCpuSeconds(pid_t pid) {
   return static_cast<double>(utime + stime) / sysconf(_SC_CLK_TCK);
 }
 
+// Scheduler statistics of one thread of this process (/proc schedstat): time on a CPU,
+// time runnable but waiting for one (preempted), and how many times it was put on a CPU.
+struct ThreadSched {
+  double run = 0, wait = 0, slices = 0;
+};
+ThreadSched threadSched(long tid) {
+  std::ifstream in("/proc/self/task/" + std::to_string(tid) + "/schedstat");
+  unsigned long long run = 0, wait = 0, slices = 0;
+  in >> run >> wait >> slices;
+  return {run * 1e-9, wait * 1e-9, static_cast<double>(slices)};
+}
+
 double processCpuSeconds() {
   timespec t{};
   clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
@@ -160,6 +172,7 @@ struct Phase {
   int blocks = 0, block_steps = 0;
   std::array<Column, 3> columns;  // bare, core, driver
   double max_qpos_difference = 0;  // core vs bare at block ends (same trajectory?)
+  ThreadSched sim_thread;          // of the driver's simulation thread, summed over its blocks
   bool ok = false;
 };
 
@@ -235,6 +248,7 @@ Phase pairedPhase(const std::string& label, const std::string& ns, const std::st
   for (int b = 0; b < kWarmup + blocks; ++b) {
     for (int v : kOrders[b % 6]) {
       const double cpu0 = processCpuSeconds();
+      const ThreadSched sched0 = threadSched(driver.simulationThreadId());
       Stopwatch watch;
       const bool ok = v == kBare ? runBare() : v == kCore ? runCore() : runDriver();
       const double t = watch.elapsed();
@@ -247,6 +261,12 @@ Phase pairedPhase(const std::string& label, const std::string& ns, const std::st
       if (b >= kWarmup) {
         phase.columns[v].seconds.push_back(t);
         phase.columns[v].cpu_seconds.push_back(cpu);
+        if (v == kDriver) {
+          const ThreadSched sched1 = threadSched(driver.simulationThreadId());
+          phase.sim_thread.run += sched1.run - sched0.run;
+          phase.sim_thread.wait += sched1.wait - sched0.wait;
+          phase.sim_thread.slices += sched1.slices - sched0.slices;
+        }
       }
     }
     for (int i = 0; i < nq; ++i)
@@ -303,6 +323,10 @@ void printPhase(const Phase& p) {
       std::printf("%+9.1f %% %+8.1f %%   %+7.1f .. %+5.1f %%\n", r.median, r.mean, r.p25, r.p75);
     }
   }
+  const double steps = p.blocks * static_cast<double>(p.block_steps);
+  std::printf("  driver's simulation thread: on a CPU %.1f us/step, preempted (runnable, waiting) %.2f us/step, "
+              "scheduled in %.0f times per block\n",
+              1e6 * p.sim_thread.run / steps, 1e6 * p.sim_thread.wait / steps, p.sim_thread.slices / p.blocks);
 }
 
 }  // namespace

@@ -6,9 +6,13 @@
 
 #include <pthread.h>
 #include <sched.h>
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
+#include <cerrno>
 #include <cmath>
 #include <cstring>
 #include <sstream>
@@ -115,6 +119,9 @@ DriverParams readParams(const ros::NodeHandle& pnh) {
   if (p.realtime_priority < 0 || p.realtime_priority > 99)
     throw ParameterError("~realtime_priority must be in [0, 99] (0 = normal scheduling), got " +
                          std::to_string(p.realtime_priority));
+  p.lockstep_nice = param<int>(pnh, "lockstep_nice", p.lockstep_nice, "an integer");
+  if (p.lockstep_nice < -20 || p.lockstep_nice > 0)
+    throw ParameterError("~lockstep_nice must be in [-20, 0] (0 = unchanged), got " + std::to_string(p.lockstep_nice));
   p.diagnostics_period = paramDouble(pnh, "diagnostics_period", p.diagnostics_period);
   if (!(p.diagnostics_period >= 0.05 && p.diagnostics_period <= 60))
     throw ParameterError("~diagnostics_period must be in [0.05, 60] s, got " + std::to_string(p.diagnostics_period));
@@ -233,6 +240,22 @@ void SimDriver::leaveRealtimeScheduling(const char* why) {
   ROS_WARN("adroit_sim: leaving SCHED_FIFO: %s", why);
 }
 
+void SimDriver::raiseLockstepWeight() {
+  if (params_.lockstep_nice == 0) return;
+  if (std::thread::hardware_concurrency() < 2) {
+    ROS_WARN("adroit_sim: one CPU: ~lockstep_nice not applied, so that the other nodes keep a share of it");
+    return;
+  }
+  // Linux: a thread id as PRIO_PROCESS sets the nice value of that thread alone.
+  if (setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), params_.lockstep_nice) != 0) {
+    ROS_WARN("adroit_sim: ~lockstep_nice %d not permitted (%s); stepping at the default weight "
+             "(grant a nice limit or CAP_SYS_NICE, or set ~lockstep_nice: 0)",
+             params_.lockstep_nice, std::strerror(errno));
+    return;
+  }
+  thread_nice_ = params_.lockstep_nice;
+}
+
 void SimDriver::loop() {
   const double dt = params_.sim.timestep;
   // Real time: state k is published at origin + k dt (wall); computing it happens before.
@@ -243,7 +266,9 @@ void SimDriver::loop() {
   // missed in a row (the machine cannot step this scene in real time) it returns to normal
   // scheduling.
   constexpr int kMaxMissedInRow = 250;
+  sim_thread_id_ = syscall(SYS_gettid);
   bool fifo = params_.realtime && params_.realtime_priority > 0 && enterRealtimeScheduling();
+  if (!params_.realtime) raiseLockstepWeight();
   int missed_in_row = 0;
   while (running_) {
     bool requested = false, last_requested = false, publish_now = false;
@@ -441,6 +466,13 @@ void SimDriver::publishQueued() {
     end = queued_batches_;  // everything queued: one wake-up for many steps
   }
   if (first == end) return;
+  // One /clock for the chunk, with its newest time, ahead of the chunk's messages: a stamp
+  // still never arrives ahead of the clock. Publishing every step's clock would cost every
+  // sim-time node of the graph a message per step (see README).
+  double newest_clock = -1;
+  for (std::uint64_t i = first; i < end; ++i)
+    if (ring_[i % kRingSize].clock) newest_clock = ring_[i % kRingSize].sim_clock;
+  if (newest_clock >= 0) publishClock(newest_clock);
   for (std::uint64_t i = first; i < end; ++i) publishBatch(ring_[i % kRingSize]);
   {
     std::lock_guard<std::mutex> lock(publish_mutex_);
@@ -449,17 +481,16 @@ void SimDriver::publishQueued() {
   published_cv_.notify_all();  // room for the simulation thread; services waiting for a republish
 }
 
+void SimDriver::publishClock(double sim_clock) {
+  // By shared pointer: this node's own /clock subscription (roscpp subscribes every node to
+  // /clock under /use_sim_time) then gets the message directly, without a serialisation.
+  auto clock = boost::make_shared<rosgraph_msgs::Clock>();
+  clock->clock = ros::Time(sim_clock);
+  clock_pub_.publish(clock);
+}
+
 void SimDriver::publishBatch(const Batch& batch) {
   fillMessages(batch);
-  // /clock first, so that a stamp never arrives ahead of the clock it refers to.
-  if (batch.clock) {
-    // By shared pointer: this node's own /clock subscription (roscpp subscribes every node
-    // to /clock under /use_sim_time) then gets the message directly, instead of through a
-    // serialisation and a wake-up of roscpp's poll thread for every step.
-    auto clock = boost::make_shared<rosgraph_msgs::Clock>();
-    clock->clock = ros::Time(batch.sim_clock);
-    clock_pub_.publish(clock);
-  }
   if (batch.joints) {
     joint_pub_.publish(joint_msg_);
     const double wall_now = wallSeconds();
@@ -729,7 +760,9 @@ void SimDriver::onDiagnostics(const ros::WallTimerEvent&) {
   add("publication_lateness", formatSummary(lateness, 1e6, "us"));
   add("deadline_misses", std::to_string(misses));
   const int fifo = fifo_priority_;
-  add("realtime_scheduling", fifo > 0 ? "SCHED_FIFO " + std::to_string(fifo) : "normal");
+  const int nice = thread_nice_;
+  add("thread_scheduling", fifo > 0 ? "SCHED_FIFO " + std::to_string(fifo)
+                           : nice != 0 ? "normal, nice " + std::to_string(nice) : "normal");
   add("schedule_resyncs", std::to_string(resyncs));
   add("safe_state", boolText(safety.safe_state));
   add("estop_latched", boolText(safety.estop_latched));

@@ -45,6 +45,7 @@ class Params(unittest.TestCase):
         self.check("bad_lockstep", ["_realtime:=false"], "~realtime", "/use_sim_time")
         self.check("bad_type", ["_timestep:=fast"], "~timestep")
         self.check("bad_priority", ["_realtime_priority:=120"], "~realtime_priority", "[0, 99]")
+        self.check("bad_nice", ["_lockstep_nice:=5"], "~lockstep_nice", "[-20, 0]")
 
 
 if __name__ == "__main__":

@@ -55,6 +55,10 @@ struct DriverParams {
   // 0 = normal scheduling. Falls back to normal scheduling, with a warning, when the system
   // does not permit it.
   int realtime_priority = 20;
+  // Lockstep only: nice value of the simulation thread, in [-20, 0], 0 = unchanged. The
+  // thread never sleeps there, so SCHED_FIFO would be throttled (50 ms stalls every second);
+  // a high normal-scheduling weight instead keeps consumer processes from preempting it.
+  int lockstep_nice = -20;
 };
 
 // Reads and validates ~parameters. Throws ParameterError (unknown scene, bad value...).
@@ -73,6 +77,8 @@ class SimDriver {
   // and the steps simulated so far.
   std::vector<double> takeJointIntervals();
   std::uint64_t steps();
+  // Kernel thread id of the simulation thread (0 before start), for scheduling statistics.
+  long simulationThreadId() const { return sim_thread_id_; }
 
  private:
   // What is due after one step. Lockstep: handed from the simulation thread to the
@@ -105,6 +111,9 @@ class SimDriver {
   // warning when not permitted.
   bool enterRealtimeScheduling();
   void leaveRealtimeScheduling(const char* why);
+  // Lockstep: the simulation thread at ~lockstep_nice; one warning when not permitted.
+  void raiseLockstepWeight();
+  void publishClock(double sim_clock);
   void publishBatch(const Batch& batch);
   // After reset / set object pose: publish the new state now and wait until it is sent.
   void republishAndWait();
@@ -162,6 +171,8 @@ class SimDriver {
   // simulation thread).
   std::atomic<std::uint64_t> steps_done_{0};
   std::atomic<int> fifo_priority_{0};  // of the simulation thread now (0 = normal scheduling)
+  std::atomic<int> thread_nice_{0};    // of the simulation thread now (lockstep)
+  std::atomic<long> sim_thread_id_{0};
   std::thread thread_;
 
   // Publication ring: slots [published_batches_, queued_batches_) wait for the publisher;

@@ -2,6 +2,7 @@
 """Real-time mode: every inter-message interval of joint_states (2 ms) and actuator_states
 (4 ms) is within 5 % of nominal (by header stamp: no drops, no doubles, no beat), arrival
 rates are within 5 % over 10 s of wall time, and the real-time factor is 1.00 +/- 0.05."""
+import os
 import threading
 import time
 import unittest
@@ -73,6 +74,8 @@ class RealTime(unittest.TestCase):
                 break
         self.assertAlmostEqual(float(values["real_time_factor"]), 1.0, delta=0.05, msg=str(values))
         self.assertEqual(values["time_mode"], "realtime")
+        if os.geteuid() == 0:
+            self.assertEqual(values["thread_scheduling"], "SCHED_FIFO 20", str(values))
 
 
 if __name__ == "__main__":

@@ -116,6 +116,27 @@ class ResetState(unittest.TestCase):
         self.assertFalse(self.d.reset(pressure=[float("nan")] * N).success)
         self.assertTrue(self.d.step_srv(1).success, "node still running")
 
+    def test_each_requested_step_publishes_its_own_clock(self):
+        # Free-running lockstep publishes one /clock per chunk of steps; stepped on request,
+        # one step at a time, every step's time must go out (a controller waits for it).
+        d = self.d
+        times = [d.step(1)[0] for _ in range(5)]
+        deadline = time.time() + 5
+        while time.time() < deadline:
+            with d.lock:
+                seen = [t for t in times if any(abs(c - t) < 1e-6 for c in d.clocks)]
+            if len(seen) == len(times):
+                break
+            time.sleep(0.05)
+        self.assertEqual(seen, times, "a requested step's /clock was not published")
+
+    def test_lockstep_thread_runs_at_the_highest_normal_weight(self):
+        values = self.d.diagnostics()
+        if os.geteuid() == 0:  # permitted: applied
+            self.assertEqual(values["thread_scheduling"], "normal, nice -20", str(values))
+        else:  # not permitted: reported as not applied, and the node runs on
+            self.assertEqual(values["thread_scheduling"], "normal", str(values))
+
     def test_zz_clock_and_stamps_never_go_back_and_lockstep_runs_fast(self):
         d = self.d
         t0 = d.step(1)[0]

@@ -11,8 +11,8 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <sstream>
@@ -469,10 +469,12 @@ void SimDriver::publishQueued() {
   // One /clock for the chunk, with its newest time, ahead of the chunk's messages: a stamp
   // still never arrives ahead of the clock. Publishing every step's clock would cost every
   // sim-time node of the graph a message per step (see README).
-  double newest_clock = -1;
-  for (std::uint64_t i = first; i < end; ++i)
-    if (ring_[i % kRingSize].clock) newest_clock = ring_[i % kRingSize].sim_clock;
-  if (newest_clock >= 0) publishClock(newest_clock);
+  for (std::uint64_t i = end; i-- > first;) {
+    if (ring_[i % kRingSize].clock) {
+      publishClock(ring_[i % kRingSize].sim_clock);
+      break;
+    }
+  }
   for (std::uint64_t i = first; i < end; ++i) publishBatch(ring_[i % kRingSize]);
   {
     std::lock_guard<std::mutex> lock(publish_mutex_);

@@ -6,4 +6,4 @@ cd "$WS_ROOT"
 JOBS="${ADROIT_BUILD_JOBS:-$(nproc)}"
 export MAKEFLAGS="-j$JOBS"
 colcon --log-base log build --metas colcon.meta --parallel-workers 1 \
-  --event-handlers console_cohesion- summary+ status- "$@"
+  --event-handlers console_cohesion- summary+ "$@"

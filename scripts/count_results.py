@@ -1,43 +1,165 @@
 #!/usr/bin/python3
-"""Counts test cases in the JUnit XML files that colcon/catkin wrote under build/.
+"""Counts the test cases of a `colcon test` run from the JUnit files under build/.
 
 Prints each failing case and a final line 'N passed, N failed'. Exit 1 if anything failed
-or no test ran at all. A test binary that crashed or never wrote results is reported by
-catkin as a failing 'MISSING-RESULT' case, so it is counted too.
+or no test ran at all. Every way a test can go wrong is counted as a failure:
+
+* a failing or erroring case in any result file (gtest-*, rosunit-*, pytest, ...);
+* a result file that cannot be read (a test node killed while writing it);
+* catkin's MISSING-*.xml placeholder (a gtest binary or rostest that wrote no result);
+* a rostest wrapper case (rostest-*.xml, one case `test<name>` per <test> tag) that failed
+  while its test node's own file rosunit-<name>.xml is missing, unreadable or shows no
+  failure: the node crashed, timed out or never started. Its inner cases are counted once,
+  from the inner file; the wrapper adds a case only where the inner file cannot speak;
+* a ctest test listed as failed (non-zero exit, e.g. a sanitizer report at exit) whose
+  result file shows no failure;
+* a runner named with --failed-command (it exited non-zero) when no result shows a failure.
 """
+import argparse
 import glob
+import os
 import sys
 import xml.etree.ElementTree as ET
 
-def main(build_dir):
-    passed, failed, skipped = 0, 0, 0
-    failures = []
-    for path in sorted(glob.glob(f"{build_dir}/*/test_results/**/*.xml", recursive=True)):
-        # rostest writes a wrapper file (rostest-*.xml) that repeats the node's own cases.
-        if path.rsplit("/", 1)[-1].startswith("rostest-"):
+WRAPPER_PREFIX = "rostest-"
+WRAPPER_CLASS = "rostest.runner.RosTest"
+
+
+class Count:
+    def __init__(self):
+        self.passed = self.failed = self.skipped = 0
+        self.failures = []
+
+    def fail(self, what):
+        self.failed += 1
+        self.failures.append(what)
+
+
+def read_cases(path):
+    """(name, outcome) per test case, outcome in pass/fail/skip; None if unreadable or empty."""
+    try:
+        root = ET.parse(path).getroot()
+    except (ET.ParseError, OSError):
+        return None
+    cases = []
+    for case in root.iter("testcase"):
+        name = f"{case.get('classname', '')}.{case.get('name', '')}"
+        if case.find("failure") is not None or case.find("error") is not None:
+            cases.append((name, "fail"))
+        elif case.find("skipped") is not None:
+            cases.append((name, "skip"))
+        else:
+            cases.append((name, "pass"))
+    return cases or None
+
+
+def add_cases(count, path, cases):
+    failed = False
+    for name, outcome in cases:
+        if outcome == "fail":
+            count.fail(f"{path}: {name}")
+            failed = True
+        elif outcome == "skip":
+            count.skipped += 1
+        else:
+            count.passed += 1
+    return failed
+
+
+def ctest_failures(package_build_dir):
+    """Result-file stems of the ctest tests that failed: '_ctest_<pkg>_gtest_test_x' -> 'gtest-test_x'."""
+    log = os.path.join(package_build_dir, "Testing", "Temporary", "LastTestsFailed.log")
+    pkg = os.path.basename(package_build_dir)
+    stems = []
+    if os.path.exists(log):
+        for line in open(log, encoding="utf-8", errors="replace"):
+            name = line.strip().split(":", 1)[-1]
+            prefix = f"_ctest_{pkg}_"
+            if name.startswith(prefix):
+                kind, _, rest = name[len(prefix):].partition("_")
+                stems.append(f"{kind}-{rest[:-5] if rest.endswith('.test') else rest}")
+            elif name:
+                stems.append(name)
+    return stems
+
+
+def count_package(count, package_build_dir):
+    files = sorted(glob.glob(f"{package_build_dir}/test_results/**/*.xml", recursive=True))
+    outcome_by_stem = {}  # result-file stem -> True if it counted a failure
+    wrappers = [f for f in files if os.path.basename(f).startswith(WRAPPER_PREFIX)]
+    claimed = set()  # inner files a wrapper speaks for
+
+    for wrapper in wrappers:
+        cases = read_cases(wrapper)
+        stem = os.path.basename(wrapper)[:-4]
+        if cases is None:
+            count.fail(f"{wrapper}: unreadable rostest result")
+            outcome_by_stem[stem] = True
             continue
-        try:
-            root = ET.parse(path).getroot()
-        except ET.ParseError as err:
-            failed += 1
-            failures.append(f"{path}: unreadable result file ({err})")
+        wrapper_failed = False
+        for name, outcome in cases:
+            test_name = name.split(".")[-1]
+            inner = os.path.join(os.path.dirname(wrapper), f"rosunit-{test_name[4:]}.xml")
+            if not name.startswith(WRAPPER_CLASS + ".test"):
+                inner = None
+            inner_cases = read_cases(inner) if inner and os.path.exists(inner) else None
+            if inner:
+                claimed.add(inner)
+            if inner_cases is None:
+                # The test node wrote nothing usable: the wrapper's verdict is the only one.
+                if outcome == "fail":
+                    why = "no result from the test node (crashed, timed out or never started)"
+                    count.fail(f"{wrapper}: {name}: {why}")
+                    wrapper_failed = True
+                elif outcome == "skip":
+                    count.skipped += 1
+                else:
+                    count.passed += 1
+                continue
+            inner_failed = add_cases(count, inner, inner_cases)
+            wrapper_failed |= inner_failed
+            if outcome == "fail" and not inner_failed:
+                count.fail(f"{wrapper}: {name}: rostest failed although the node's results passed")
+                wrapper_failed = True
+        outcome_by_stem[stem] = wrapper_failed
+
+    for path in files:
+        if path in claimed or path in wrappers:
             continue
-        for case in root.iter("testcase"):
-            name = f"{case.get('classname', '')}.{case.get('name', '')}"
-            if case.find("failure") is not None or case.find("error") is not None:
-                failed += 1
-                failures.append(f"{path}: {name}")
-            elif case.find("skipped") is not None:
-                skipped += 1
-            else:
-                passed += 1
-    for f in failures:
+        cases = read_cases(path)
+        stem = os.path.basename(path)[:-4]
+        if cases is None:
+            count.fail(f"{path}: unreadable or empty result file")
+            outcome_by_stem[stem] = True
+        else:
+            outcome_by_stem[stem] = add_cases(count, path, cases)
+
+    for stem in ctest_failures(package_build_dir):
+        if not outcome_by_stem.get(stem, False) and not outcome_by_stem.get(f"MISSING-{stem}", False):
+            count.fail(f"{package_build_dir}: ctest test {stem} exited non-zero although its results passed")
+
+
+def main(build_dir, failed_commands=()):
+    count = Count()
+    for package_build_dir in sorted(glob.glob(f"{build_dir}/*/")):
+        count_package(count, package_build_dir.rstrip("/"))
+    if count.failed == 0:
+        # A runner that failed without any failing result left a failure we cannot see.
+        for command in failed_commands:
+            count.fail(f"{command} exited non-zero with no failing result")
+    for f in count.failures:
         print(f"FAILED {f}")
-    line = f"{passed} passed, {failed} failed"
-    if skipped:
-        line += f", {skipped} skipped"
+    line = f"{count.passed} passed, {count.failed} failed"
+    if count.skipped:
+        line += f", {count.skipped} skipped"
     print(line)
-    return 0 if failed == 0 and passed > 0 else 1
+    return 0 if count.failed == 0 and count.passed > 0 else 1
+
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1] if len(sys.argv) > 1 else "build"))
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("build_dir", nargs="?", default="build")
+    parser.add_argument("--failed-command", action="append", default=[],
+                        help="a test runner that exited non-zero (counted if no result shows why)")
+    args = parser.parse_args()
+    sys.exit(main(args.build_dir, args.failed_command))

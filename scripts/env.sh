@@ -7,6 +7,8 @@ unset PYTHONPATH PYENV_VERSION
 WS_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 export WS_ROOT
 export ROS_HOME="${ROS_HOME:-$WS_ROOT/log/ros}"
+# Node output in order when it goes to a pipe or a log file, not in blocks at exit.
+export ROSCONSOLE_STDOUT_LINE_BUFFERED=1 PYTHONUNBUFFERED=1
 mkdir -p "$ROS_HOME"
 source_workspace() {
   # colcon's setup scripts reference unset variables; relax nounset while sourcing.

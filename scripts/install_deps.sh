@@ -10,16 +10,25 @@ PACKAGES=(
   python3-colcon-test-result python3-colcon-output python3-colcon-package-selection
   python3-colcon-parallel-executor python3-colcon-library-path python3-colcon-metadata
   python3-colcon-defaults python3-colcon-recursive-crawl
-  # ROS 1 (Debian packaging)
-  ros-core-dev ros-desktop-dev librosbag-dev libtf2-ros-dev python3-rostest librostest-dev
+  # ROS 1 (Debian packaging): C++ libraries and tools
+  ros-core-dev ros-desktop-dev librosbag-dev libtf2-ros-dev librostest-dev
   ros-robot-state-publisher librobot-state-publisher-dev joint-state-publisher
-  libnodeletlib-dev libnodelet-dev libnodeletlib-tools rviz
+  joint-state-publisher-gui libnodeletlib-dev libnodelet-dev libnodeletlib-tools rviz
+  # ROS command-line programs the scripts, tests and README call by name
+  rosbash python3-roslaunch python3-rosparam python3-rostopic python3-rosservice python3-rosnode
+  # Python modules imported by the rostests and the Python nodes (ros-desktop-dev brings
+  # only the C++ side of the messages)
+  python3-rospy python3-rospkg python3-rostest python3-tf2-ros python3-std-msgs
+  python3-std-srvs python3-sensor-msgs python3-geometry-msgs python3-nav-msgs
+  python3-diagnostic-msgs python3-rosgraph-msgs
   # description: URDF parsing and KDL forward kinematics
   liburdfdom-dev liburdfdom-tools libkdl-parser-dev liborocos-kdl-dev
   # simulation
   libmujoco-dev libmujoco-samples libqhull-dev
   # numerics, config, testing, benchmarks
   libeigen3-dev libyaml-cpp-dev libgtest-dev libgmock-dev libbenchmark-dev python3-numpy
+  # the workspace's own test of its result counting
+  python3-pytest
   # screenshots of rviz under a virtual display
   xvfb x11-apps imagemagick
 )

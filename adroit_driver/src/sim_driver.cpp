@@ -559,11 +559,16 @@ void SimDriver::fillMessages(const Batch& batch) {
 
 void SimDriver::reportCommand(const char* topic, const CommandResult& result) {
   if (result.applied) return;
-  ROS_ERROR_THROTTLE(1.0, "adroit_sim: %s %s: %s", topic,
-                     result.verdict == CommandVerdict::kAccepted || result.verdict == CommandVerdict::kClamped
-                         ? "ignored"
-                         : "rejected",
-                     result.error.c_str());
+  const bool valid = result.verdict == CommandVerdict::kAccepted || result.verdict == CommandVerdict::kClamped;
+  if (!valid) {
+    ROS_ERROR_THROTTLE(1.0, "adroit_sim: %s rejected: %s", topic, result.error.c_str());
+    return;
+  }
+  // A valid command while the safe state holds is expected (the senders keep running until
+  // release; at shutdown their last commands land here): said once per safe-state episode.
+  if (!warned_ignored_while_safe_.exchange(true))
+    ROS_WARN("adroit_sim: %s and further commands ignored until /adroit/estop_release: %s", topic,
+             result.error.c_str());
 }
 
 void SimDriver::onValveCommand(const adroit_msgs::ValveCommand::ConstPtr& msg) {
@@ -698,7 +703,10 @@ bool SimDriver::onRelease(std_srvs::Trigger::Request&, std_srvs::Trigger::Respon
     std::lock_guard<std::mutex> lock(robot_mutex_);
     res.success = robot_->release(&res.message);
   }
-  if (res.success) ROS_INFO("adroit_sim: safe state %s", res.message.c_str());
+  if (res.success) {
+    warned_ignored_while_safe_ = false;
+    ROS_INFO("adroit_sim: safe state %s", res.message.c_str());
+  }
   else ROS_WARN("adroit_sim: release %s", res.message.c_str());
   publishSafeStateIfChanged();
   return true;

@@ -100,6 +100,11 @@ class DemoReport:
 if __name__ == "__main__":
     rospy.init_node("demo_report")
     node = DemoReport()
+    try:  # the bringup may still be starting: the window opens with the robot's first state
+        rospy.wait_for_message("/adroit/joint_states", JointState, timeout=float(rospy.get_param("~wait", 60.0)))
+    except rospy.ROSException:
+        print("demo_report: no /adroit/joint_states: the simulation driver did not come up", file=sys.stderr)
+        sys.exit(2)
     rospy.sleep(node.duration)
     moved = node.report()
     rospy.signal_shutdown("demo finished")

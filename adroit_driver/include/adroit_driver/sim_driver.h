@@ -156,6 +156,7 @@ class SimDriver {
   nav_msgs::Odometry odom_msg_;
   visualization_msgs::MarkerArray marker_msg_;
   bool last_safe_published_ = false, safe_published_once_ = false;
+  std::atomic<bool> warned_ignored_while_safe_{false};  // this safe-state episode
   // Wall-time mode: stamp = wall_offset_ + clock, the scheduled time of the state (moves
   // forward only, when the real-time schedule restarts after a pause or an overload).
   double wall_offset_ = 0;

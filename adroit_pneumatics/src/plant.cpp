@@ -5,6 +5,8 @@
 #include <random>
 #include <stdexcept>
 
+#include "adroit_description/cylinder_catalogue.h"
+
 namespace adroit::pneumatics {
 
 using namespace constants;
@@ -12,19 +14,6 @@ using namespace constants;
 namespace {
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kMinPressure = 1e3;  // Pa; keeps the flow function's ratios finite
-
-CylinderSpec makeSpec(const std::string& type, double bore, double stroke, double dead_volume,
-                      double leak_diameter, int valve) {
-  CylinderSpec s;
-  s.type = type;
-  s.bore_diameter = bore;
-  s.bore_area = kPi * bore * bore / 4.0;
-  s.stroke = stroke;
-  s.dead_volume = dead_volume;
-  s.leak_area = kPi * leak_diameter * leak_diameter / 4.0;
-  s.valve = valveParams(valve);
-  return s;
-}
 
 // (exp(z) - 1) / z, finite at z = 0. Near zero (|z| <= 0.5, the usual non-stiff step) its
 // Taylor series to z^9 (truncation < 3e-11 relative), which is cheaper than an exp and a
@@ -75,28 +64,24 @@ __attribute__((always_inline)) inline double rhs(double p, const ChamberInputs& 
 }  // namespace
 
 CylinderSpec cylinderSpec(const std::string& type) {
-  // Leak orifice of the AIRPEL air seal: 1.9665e-4 m for the 9 mm bore (section 4.5); the
-  // seal gap is similar across bores, so the equivalent diameter scales with the bore.
-  constexpr double kLeakM9 = 1.9665e-4;
-  // Dead volume at full retraction: about 0.1 cm^3 for the M9 (section 4.3.3); larger
-  // cylinders scale with bore area (end cap and port).
-  if (type == "M9") return makeSpec(type, 0.009, 0.0375, 1.0e-7, kLeakM9, 1);
-  if (type == "M16") return makeSpec(type, 0.016, 0.050, 1.0e-7 * (16.0 / 9.0) * (16.0 / 9.0),
-                                     kLeakM9 * 16.0 / 9.0, 2);
-  if (type == "M24") return makeSpec(type, 0.024, 0.075, 1.0e-7 * (24.0 / 9.0) * (24.0 / 9.0),
-                                     kLeakM9 * 24.0 / 9.0, 2);
-  // Arm shoulder/elbow: the thesis drives the shoulder with several M24 units in parallel
-  // (3.8), one valve per cylinder (3.10). The M40 stands for that bundle: bore area
-  // (40/24)^2 = 2.8 M24s, and so valve 2's port areas times the same factor. Dead volume
-  // and leak scale with the bore; the 100 mm stroke is our assumption.
-  if (type == "M40") {
-    CylinderSpec s = makeSpec(type, 0.040, 0.100, 1.0e-7 * (40.0 / 9.0) * (40.0 / 9.0), kLeakM9 * 40.0 / 9.0, 2);
-    constexpr double kUnits = (40.0 / 24.0) * (40.0 / 24.0);
-    for (GompertzArea* port : {&s.valve.inlet, &s.valve.exhaust}) port->offset *= kUnits, port->a *= kUnits;
-    return s;
+  // The catalogue is adroit_description's (config/cylinders.yaml, the one source of the
+  // cylinder data; its comments give the values' sources and assumptions).
+  const description::CylinderType* c = description::findCylinderType(type);
+  if (!c) {
+    std::string known;
+    for (const auto& entry : description::kCylinderCatalogue) known += (known.empty() ? "" : ", ") + std::string(entry.type);
+    throw std::invalid_argument("cylinderSpec: unknown cylinder type '" + type + "' (known: " + known + ")");
   }
-  throw std::invalid_argument("cylinderSpec: unknown cylinder type '" + type +
-                              "' (known: M9, M16, M24, M40)");
+  CylinderSpec s;
+  s.type = type;
+  s.bore_diameter = c->bore_diameter;
+  s.bore_area = kPi * c->bore_diameter * c->bore_diameter / 4.0;
+  s.stroke = c->stroke;
+  s.dead_volume = c->dead_volume;
+  s.leak_area = kPi * c->leak_diameter * c->leak_diameter / 4.0;
+  s.valve = valveParams(c->valve);
+  for (GompertzArea* port : {&s.valve.inlet, &s.valve.exhaust}) port->offset *= c->valve_scale, port->a *= c->valve_scale;
+  return s;
 }
 
 double chamberPressureRate(double p, const ChamberInputs& in) {

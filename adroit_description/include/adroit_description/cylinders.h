@@ -8,10 +8,10 @@
 #include <string>
 #include <vector>
 
+#include "adroit_description/cylinder_catalogue.h"  // kAtmosphericPressure, the catalogue
+
 namespace adroit {
 namespace description {
-
-constexpr double kAtmosphericPressure = 101325.0;  // Pa
 
 struct Cylinder {
   std::string name;     // actuator name, e.g. A_FFJ2_flex

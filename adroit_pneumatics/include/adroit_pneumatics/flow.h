@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 
+#include "adroit_description/cylinder_catalogue.h"
 #include "adroit_pneumatics/fast_exp.h"
 
 namespace adroit::pneumatics {
@@ -17,7 +18,7 @@ constexpr double kTemperature = 293.0;    // K, isothermal chamber assumption
 constexpr double kDischarge = 0.72;       // C
 constexpr double kCompressibility = 0.99; // Z
 constexpr double kKappa = 1.4;            // specific heat ratio, polytropic index
-constexpr double kAtmosphere = 101325.0;  // Pa absolute
+constexpr double kAtmosphere = description::kAtmosphericPressure;  // Pa absolute, adroit_description's
 constexpr double kSpecificGas = kGasConstant / kMolarMass;  // R_s, J/(kg K)
 constexpr double kRsT = kSpecificGas * kTemperature;         // R_s T, J/kg
 }  // namespace constants

@@ -26,8 +26,10 @@ struct CylinderSpec {
 
 // Catalogue: "M9" (AIRPEL M9D37.5, fingers), "M16" (AIRPEL M16, wrist), "M24" (arm),
 // "M40" (arm shoulder/elbow, 40 mm bore, 100 mm stroke).
-// Unknown type -> std::invalid_argument naming it. Values and their sources are in the
-// README (table 4.3, section 4.5, 3.5.1); M24 and M40 values are documented assumptions.
+// Unknown type -> std::invalid_argument naming it. The values are adroit_description's
+// catalogue (config/cylinders.yaml, compiled in as adroit_description/cylinder_catalogue.h);
+// their sources are in that file (table 4.3, section 4.5, 3.5.1); M24 and M40 values are
+// documented assumptions.
 CylinderSpec cylinderSpec(const std::string& type);
 
 // Shared supply (section 4.3.6): a first-order lag towards

@@ -577,7 +577,7 @@ int main(int argc, char** argv) {
         for (double ki : {0.0, 80.0, 160.0, 320.0, 640.0, 1280.0})
           for (double kd : {0.0, 0.01, 0.03}) {
             PidfParams prm;
-            prm.kp = kp, prm.ki = ki, prm.kd = kd;
+            prm.kp = kp * 1e-6, prm.ki = ki * 1e-6, prm.kd = kd * 1e-6;  // grid in V/MPa, gains in V/Pa
             prm.u_min = -g_limit, prm.u_max = g_limit;
             PidfController pid(model, prm);
             double score = 0;
@@ -586,7 +586,7 @@ int main(int argc, char** argv) {
           }
       const std::string label = rig.moving ? "robust: model locked, M9 leaky moving" : "locked leak-free M9";
       std::printf("  %s; PIDF grid-searched: kp %.1f V/MPa, ki %.1f V/(MPa s), kd %.3f V s/MPa, model feedforward\n",
-                  label.c_str(), best_pid.kp, best_pid.ki, best_pid.kd);
+                  label.c_str(), best_pid.kp * 1e6, best_pid.ki * 1e6, best_pid.kd * 1e6);
       std::printf("  %-10s %12s %12s %9s %9s %7s\n", "profile", "iLQG kPa", "PIDF kPa", "iLQG ms", "PIDF ms", "ratio");
       for (const Profile& pr : profiles) {
         IlqgParams ip;
@@ -599,7 +599,7 @@ int main(int argc, char** argv) {
                     a.lag * 1e3, b.lag * 1e3, a.rmse / b.rmse);
         if (!pr.future_known) {
           IlqgParams jp = ip;  // the jump handling the pools leave off (README)
-          jp.jump_threshold = 0.02, jp.measurement_band = 4000.0;
+          jp.jump_threshold = 20e3, jp.measurement_band = 4000.0;  // Pa
           IlqgPressureController jumpy(model, jp);
           const Tracking j = track(jumpy, rig, pr, seconds, 100);
           std::printf("  %-10s %12.2f  iLQG with jump handling on (jump_threshold 20 kPa, measurement_band 4 kPa;"

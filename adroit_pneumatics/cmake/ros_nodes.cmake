@@ -2,27 +2,34 @@
 # the excitation node, the rosbag -> CSV tool for identification, and their tests.
 # Included at the end of CMakeLists.txt (after catkin_package and the core target).
 
-find_package(catkin REQUIRED COMPONENTS
-  adroit_core adroit_description adroit_msgs roscpp roslib nodelet pluginlib diagnostic_msgs rosbag std_msgs)
-
-# ROS-free: CylinderPool, default pool split, model cylinder table.
+# ROS-free: CylinderPool, default pool split, model cylinder table (adroit_description's
+# library, no ROS library).
+find_package(catkin REQUIRED COMPONENTS adroit_core adroit_description)
 add_library(adroit_pneumatics_pool src/pool.cpp)
 target_include_directories(adroit_pneumatics_pool PUBLIC include ${catkin_INCLUDE_DIRS})
 target_link_libraries(adroit_pneumatics_pool PUBLIC adroit_pneumatics_core ${catkin_LIBRARIES})
 
+# The ROS targets below: adroit_ros (typed parameters, diagnostics, rejection counters) and roscpp & co.
+find_package(catkin REQUIRED COMPONENTS
+  adroit_core adroit_description adroit_msgs adroit_ros roscpp roslib nodelet pluginlib diagnostic_msgs rosbag std_msgs)
+
 # One ROS wrapper class (pool_ros.cpp) behind both the nodelet plugin and the node.
 add_library(adroit_pneumatics_nodelets nodes/pool_ros.cpp nodes/pool_nodelet.cpp)
+target_include_directories(adroit_pneumatics_nodelets PRIVATE ${catkin_INCLUDE_DIRS})
 target_link_libraries(adroit_pneumatics_nodelets adroit_pneumatics_pool ${catkin_LIBRARIES})
 add_dependencies(adroit_pneumatics_nodelets ${catkin_EXPORTED_TARGETS})
 
 add_executable(pool_node nodes/pool_node.cpp)
+target_include_directories(pool_node PRIVATE ${catkin_INCLUDE_DIRS})
 target_link_libraries(pool_node adroit_pneumatics_nodelets ${catkin_LIBRARIES})
 
 add_executable(excitation_node nodes/excitation_node.cpp)
+target_include_directories(excitation_node PRIVATE ${catkin_INCLUDE_DIRS})
 target_link_libraries(excitation_node adroit_pneumatics_pool ${catkin_LIBRARIES})
 add_dependencies(excitation_node ${catkin_EXPORTED_TARGETS})
 
 add_executable(pneumatic_sysid_bag nodes/sysid_bag.cpp)
+target_include_directories(pneumatic_sysid_bag PRIVATE ${catkin_INCLUDE_DIRS})
 target_link_libraries(pneumatic_sysid_bag adroit_pneumatics_pool ${catkin_LIBRARIES})
 add_dependencies(pneumatic_sysid_bag ${catkin_EXPORTED_TARGETS})
 
@@ -40,6 +47,9 @@ if(CATKIN_ENABLE_TESTING)
   target_link_libraries(test_pool adroit_pneumatics_pool GTest::gtest_main)
   # The generated scenes of adroit_description (for the default split on the real model).
   target_compile_definitions(test_pool PRIVATE ADROIT_DESCRIPTION_SHARE="${adroit_description_DIR}/..")
+  # Its own binary: it replaces the global operator new/delete to count allocations.
+  catkin_add_gtest(test_pool_realtime test/test_pool_realtime.cpp)
+  target_link_libraries(test_pool_realtime adroit_pneumatics_pool GTest::gtest_main)
 
   find_package(rostest REQUIRED)
   add_rostest(test/pool.test DEPENDENCIES pool_node)

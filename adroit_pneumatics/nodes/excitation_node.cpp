@@ -8,36 +8,18 @@
 #include <string>
 #include <vector>
 
-#include <ros/package.h>
 #include <ros/ros.h>
 
 #include <adroit_msgs/ValveCommand.h>
 
-#include "adroit_description/scenes.h"
 #include "adroit_pneumatics/excitation.h"
 #include "adroit_pneumatics/pool.h"
+#include "adroit_ros/params.h"
 
 using namespace adroit::pneumatics;
+using adroit::rosutil::Params;
 
 namespace {
-
-// Reads ~key with a type check; a wrong type throws one line naming the parameter.
-template <typename T>
-T param(const ros::NodeHandle& pnh, const std::string& key, const T& fallback) {
-  if (!pnh.hasParam(key)) return fallback;
-  T value;
-  if (!pnh.getParam(key, value)) throw std::runtime_error("bad parameter " + pnh.resolveName(key) + ": wrong type");
-  return value;
-}
-// Integer parameters are accepted where a number is expected.
-double number(const ros::NodeHandle& pnh, const std::string& key, double fallback) {
-  if (!pnh.hasParam(key)) return fallback;
-  double d;
-  if (pnh.getParam(key, d)) return d;
-  int i;
-  if (pnh.getParam(key, i)) return i;
-  throw std::runtime_error("bad parameter " + pnh.resolveName(key) + ": expected a number");
-}
 
 void publish(ros::Publisher& pub, const std::vector<std::string>& names, const std::vector<double>& volts) {
   adroit_msgs::ValveCommand msg;
@@ -56,29 +38,30 @@ int main(int argc, char** argv) {
   std::vector<Excitation> generators;
   double rate = 200, duration = 0;
   try {
-    std::string model_file = param<std::string>(pnh, "model_file", "");
-    if (model_file.empty())
-      model_file = adroit::description::sceneFile(ros::package::getPath("adroit_description"),
-                                                  param<std::string>(pnh, "scene", "arm_hand"));
+    const Params prm(pnh);
+    const std::string model_file = prm.modelPath("arm_hand");
     std::vector<std::string> known;
-    for (const auto& c : loadModelCylinders(model_file)) known.push_back(c.name);
-    names = param<std::vector<std::string>>(pnh, "cylinders", {});
-    if (names.empty()) throw std::runtime_error("bad parameter " + pnh.resolveName("cylinders") + ": required (list of names)");
+    try {
+      for (const auto& c : loadModelCylinders(model_file)) known.push_back(c.name);
+    } catch (const std::exception& e) {
+      prm.fail(prm.has("model_file") ? "model_file" : "scene", e.what());
+    }
+    names = prm.strings("cylinders");
+    if (names.empty()) prm.fail("cylinders", "required (list of names)");
     for (const auto& n : names) {
-      if (std::find(known.begin(), known.end(), n) == known.end())
-        throw std::runtime_error("bad parameter " + pnh.resolveName("cylinders") + ": unknown cylinder '" + n + "'");
+      if (std::find(known.begin(), known.end(), n) == known.end()) prm.fail("cylinders", "unknown cylinder '" + n + "'");
     }
     ExcitationParams p;
-    p.kind = param<std::string>(pnh, "kind", p.kind);
-    p.amplitude = number(pnh, "amplitude", p.amplitude);
-    p.step_hold = number(pnh, "step_hold", p.step_hold);
-    p.sweep_period = number(pnh, "sweep_period", p.sweep_period);
-    p.cutoff_hz = number(pnh, "cutoff_hz", p.cutoff_hz);
-    p.random_hold = number(pnh, "random_hold", p.random_hold);
-    p.chirp_f0 = number(pnh, "chirp_f0", p.chirp_f0);
-    p.chirp_f1 = number(pnh, "chirp_f1", p.chirp_f1);
-    p.chirp_duration = number(pnh, "chirp_duration", p.chirp_duration);
-    const int seed = param<int>(pnh, "seed", 1);
+    p.kind = prm.string("kind", p.kind);
+    p.amplitude = prm.number("amplitude", p.amplitude);
+    p.step_hold = prm.number("step_hold", p.step_hold);
+    p.sweep_period = prm.number("sweep_period", p.sweep_period);
+    p.cutoff_hz = prm.number("cutoff_hz", p.cutoff_hz);
+    p.random_hold = prm.number("random_hold", p.random_hold);
+    p.chirp_f0 = prm.number("chirp_f0", p.chirp_f0);
+    p.chirp_f1 = prm.number("chirp_f1", p.chirp_f1);
+    p.chirp_duration = prm.number("chirp_duration", p.chirp_duration);
+    const int seed = prm.integer("seed", 1);
     try {
       p.validate();
     } catch (const std::exception& e) {
@@ -87,10 +70,8 @@ int main(int argc, char** argv) {
       if (what.rfind("excitation: ", 0) == 0) what = what.substr(12);
       throw std::runtime_error("bad parameter " + pnh.getNamespace() + "/" + what);
     }
-    rate = number(pnh, "rate", rate);
-    duration = number(pnh, "duration", duration);
-    if (!(rate > 0 && rate <= 2000)) throw std::runtime_error("bad parameter " + pnh.resolveName("rate") + ": must be in (0, 2000]");
-    if (!(duration >= 0)) throw std::runtime_error("bad parameter " + pnh.resolveName("duration") + ": must be >= 0 (0 = until shutdown)");
+    rate = prm.number("rate", rate, 1e-3, 2000.0);
+    duration = prm.number("duration", duration, 0.0, 1e9);  // 0 = until shutdown
     // Independent random streams per cylinder, reproducible from the seed.
     for (std::size_t i = 0; i < names.size(); ++i) {
       p.seed = static_cast<std::uint64_t>(seed) + i;

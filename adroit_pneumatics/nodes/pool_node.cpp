@@ -1,5 +1,5 @@
 // pool_node: one pneumatic force-abstraction pool as a standalone node (the same class
-// runs as the nodelet adroit_pneumatics/PoolNodelet). Parameters: see README "ROS nodes".
+// runs as the nodelet adroit_pneumatics/PoolNodelet). Parameters: see README "Pool node".
 #include <exception>
 #include <memory>
 

@@ -4,7 +4,6 @@
 #include <cmath>
 #include <limits>
 #include <stdexcept>
-#include <unordered_set>
 
 #include "adroit_core/mujoco_model.h"
 #include "adroit_pneumatics/plant.h"
@@ -25,6 +24,8 @@ const char* rejectReasonName(RejectReason reason) {
   switch (reason) {
     case RejectReason::kNone: return "none";
     case RejectReason::kTiming: return "timing";
+    case RejectReason::kStampFuture: return "stamp_future";
+    case RejectReason::kStampPast: return "stamp_past";
     case RejectReason::kLength: return "length";
     case RejectReason::kNonFinite: return "non_finite";
     case RejectReason::kUnknownName: return "unknown_name";
@@ -34,10 +35,26 @@ const char* rejectReasonName(RejectReason reason) {
   return "?";
 }
 
-std::uint64_t PoolCounters::rejectedTotal() const {
-  std::uint64_t n = 0;
-  for (auto c : references_rejected) n += c;
-  return n;
+const char* rejectReasonName(StateReject reason) {
+  switch (reason) {
+    case StateReject::kNone: return "none";
+    case StateReject::kNoStamp: return "no_stamp";
+    case StateReject::kStampFuture: return "stamp_future";
+    case StateReject::kStale: return "stale";
+    case StateReject::kLength: return "length";
+    case StateReject::kNonFinite: return "non_finite";
+    case StateReject::kDuplicateName: return "duplicate_name";
+    case StateReject::kNameOrder: return "name_order";
+    case StateReject::kCount: break;
+  }
+  return "?";
+}
+
+void putCommand(CommandSlot& slot, double stamp, const std::vector<double>& volts) {
+  PoolCommand& c = slot.back();
+  c.stamp = stamp;
+  std::copy(volts.begin(), volts.end(), c.volts.begin());  // sized by emptyCommand(n)
+  slot.publish();
 }
 
 void PoolOptions::validate() const {
@@ -52,6 +69,8 @@ void PoolOptions::validate() const {
   if (!(reference_timeout > 0) || !std::isfinite(reference_timeout))
     throw std::invalid_argument("reference_timeout: must be > 0");
   if (!(state_timeout > 0) || !std::isfinite(state_timeout)) throw std::invalid_argument("state_timeout: must be > 0");
+  if (!(stamp_tolerance > 0) || !std::isfinite(stamp_tolerance))
+    throw std::invalid_argument("stamp_tolerance: must be > 0");
   if (!(exhaust_volts >= -kValveLimit && exhaust_volts <= kValveLimit))
     throw std::invalid_argument("exhaust_volts: must be in [-5, 5]");
   if (!(atmosphere > 0) || !std::isfinite(atmosphere)) throw std::invalid_argument("atmosphere: must be > 0");
@@ -59,19 +78,21 @@ void PoolOptions::validate() const {
 
 CylinderPool::CylinderPool(std::vector<PoolCylinder> cylinders, std::vector<std::string> known_names,
                            const PoolOptions& options)
-    : cylinders_(std::move(cylinders)), known_names_(std::move(known_names)), options_(options) {
+    : cylinders_(std::move(cylinders)), known_names_(std::move(known_names)), options_(options),
+      plan_box_(std::vector<Plan>(cylinders_.size())), state_box_(std::vector<State>(cylinders_.size())) {
   options_.validate();
   if (cylinders_.empty()) throw std::invalid_argument("pool has no cylinders");
-  for (const auto& n : known_names_) slot_.emplace(n, -1);
+  for (std::size_t k = 0; k < known_names_.size(); ++k) known_index_.emplace(known_names_[k], k);
+  slot_of_known_.assign(known_names_.size(), -1);
   for (std::size_t i = 0; i < cylinders_.size(); ++i) {
     const PoolCylinder& c = cylinders_[i];
-    const auto it = slot_.find(c.name);
-    if (it == slot_.end()) throw std::invalid_argument("unknown cylinder '" + c.name + "'");
-    if (it->second >= 0) throw std::invalid_argument("cylinder '" + c.name + "' listed twice");
+    const auto it = known_index_.find(c.name);
+    if (it == known_index_.end()) throw std::invalid_argument("unknown cylinder '" + c.name + "'");
+    if (slot_of_known_[it->second] >= 0) throw std::invalid_argument("cylinder '" + c.name + "' listed twice");
     if (!(c.bore_area > 0) || !(c.dead_volume > 0))
       throw std::invalid_argument("cylinder '" + c.name + "' needs bore_area > 0 and dead_volume > 0");
     c.model.validate();
-    it->second = static_cast<int>(i);
+    slot_of_known_[it->second] = static_cast<int>(i);
     names_.push_back(c.name);
     const ParametricModel model(c.model);
     if (options_.controller == "ilqg")
@@ -79,17 +100,18 @@ CylinderPool::CylinderPool(std::vector<PoolCylinder> cylinders, std::vector<std:
     else
       controllers_.push_back(std::make_unique<PidfController>(model, options_.pidf));
   }
-  plans_.resize(size());
-  states_.resize(size());
+  input_plans_.resize(size());
+  input_states_.resize(size());
+  seen_.assign(known_names_.size(), 0);
+  ours_.reserve(size());
+  valve_index_.assign(size(), -1);
+  expired_serial_.assign(size(), 0);
   active_.assign(size(), 0);
   commands_.assign(size(), options_.exhaust_volts);
   // The iLQG horizon needs horizon + 1 reference samples; PIDF uses only the first.
   ref_buffer_.resize(options_.controller == "ilqg" ? options_.ilqg.horizon + 1 : 1);
-}
-
-Verdict CylinderPool::reject(RejectReason reason, std::string detail) {
-  ++counters_.references_rejected[static_cast<int>(reason)];
-  return {reason, std::move(detail)};
+  // Room for 20 s of ticks at 200 Hz between two takeWindow() calls; beyond, samples drop.
+  window_solve_.reserve(4096);
 }
 
 Verdict CylinderPool::setReference(double now, double t0, double dt, std::size_t steps,
@@ -97,99 +119,161 @@ Verdict CylinderPool::setReference(double now, double t0, double dt, std::size_t
   if (!std::isfinite(t0)) return reject(RejectReason::kTiming, "reference stamp is not finite");
   if (steps == 0) return reject(RejectReason::kLength, "reference has 0 steps");
   if (steps > 1 && !(dt > 0 && std::isfinite(dt))) return reject(RejectReason::kTiming, "reference dt must be > 0");
+  // A stamp on another clock (wall time under sim time or the reverse) or a reference that
+  // is over already would otherwise be read as a constant: its last sample held.
+  const double tol = options_.stamp_tolerance;
+  if (t0 > now + tol)
+    return reject(RejectReason::kStampFuture, "reference starts " + std::to_string(t0 - now) +
+                                                  " s after the pool's clock (stamp_tolerance " + std::to_string(tol) +
+                                                  " s)");
+  const double end = t0 + (steps - 1) * (steps > 1 ? dt : 0.0);
+  if (end < now - tol)
+    return reject(RejectReason::kStampPast, "reference ended " + std::to_string(now - end) +
+                                                " s before the pool's clock (stamp_tolerance " + std::to_string(tol) +
+                                                " s)");
   if (names.empty()) return reject(RejectReason::kLength, "reference names no cylinders");
   if (force.size() != steps * names.size())
     return reject(RejectReason::kLength, "reference has " + std::to_string(force.size()) + " forces, expected steps " +
                                              std::to_string(steps) + " x names " + std::to_string(names.size()));
   if (!allFinite(force)) return reject(RejectReason::kNonFinite, "reference contains NaN or Inf");
-  std::vector<std::pair<int, std::size_t>> ours;  // (slot, column)
-  std::unordered_set<std::string> seen;
+  ours_.clear();
+  ++seen_mark_;
   for (std::size_t j = 0; j < names.size(); ++j) {
-    const auto it = slot_.find(names[j]);
-    if (it == slot_.end()) return reject(RejectReason::kUnknownName, "reference names unknown cylinder '" + names[j] + "'");
-    if (!seen.insert(names[j]).second)
+    const auto it = known_index_.find(names[j]);
+    if (it == known_index_.end())
+      return reject(RejectReason::kUnknownName, "reference names unknown cylinder '" + names[j] + "'");
+    if (seen_[it->second] == seen_mark_)
       return reject(RejectReason::kDuplicateName, "reference names cylinder '" + names[j] + "' twice");
-    if (it->second >= 0) ours.emplace_back(it->second, j);
+    seen_[it->second] = seen_mark_;
+    if (slot_of_known_[it->second] >= 0) ours_.emplace_back(slot_of_known_[it->second], j);
   }
-  if (ours.empty()) {
-    ++counters_.references_ignored;
-    return {};
+  Verdict verdict;
+  if (ours_.empty()) {
+    verdict.ignored = true;
+    return verdict;
   }
-  for (const auto& [slot, col] : ours) {
-    Plan& plan = plans_[slot];
+  const std::uint64_t serial = next_serial_++;
+  for (const auto& [slot, col] : ours_) {
+    Plan& plan = input_plans_[slot];
     plan.valid = true;
+    plan.serial = serial;
     plan.t0 = t0;
     plan.dt = steps > 1 ? dt : 1.0;
     plan.received = now;
     plan.pressure.resize(steps);
     // Tendons only pull: a negative force asks for less than atmospheric pressure, which the
-    // chamber cannot reach, so it is clamped to zero tension.
-    for (std::size_t k = 0; k < steps; ++k)
-      plan.pressure[k] = options_.atmosphere + std::max(0.0, force[k * names.size() + col]) / cylinders_[slot].bore_area;
+    // chamber cannot reach, so it is clamped to zero tension (and reported: the driver
+    // rejects negative tensions, a planner sending them has a bug worth seeing).
+    for (std::size_t k = 0; k < steps; ++k) {
+      const double f = force[k * names.size() + col];
+      if (f < 0) verdict.clamped_negative = true;
+      plan.pressure[k] = options_.atmosphere + std::max(0.0, f) / cylinders_[slot].bore_area;
+    }
   }
-  ++counters_.references_accepted;
-  return {};
+  plan_box_.back() = input_plans_;  // this thread's buffer; reuses its capacity
+  plan_box_.publish();
+  return verdict;
 }
 
-Verdict CylinderPool::setState(double now, const std::vector<std::string>& names, const std::vector<double>& pressure,
-                               const std::vector<double>& length, const std::vector<double>& length_rate,
-                               double supply) {
-  auto bad = [&](std::string detail) {
-    ++counters_.states_rejected;
-    return Verdict{RejectReason::kLength, std::move(detail)};
+StateVerdict CylinderPool::setState(double now, double stamp, const std::vector<std::string>& names,
+                                    const std::vector<double>& pressure, const std::vector<double>& length,
+                                    const std::vector<double>& length_rate, double supply) {
+  StateVerdict verdict;
+  auto bad = [&verdict](StateReject reason, std::string detail) {
+    verdict.reason = reason;
+    verdict.detail = std::move(detail);
+    return verdict;
   };
+  if (!std::isfinite(stamp)) return bad(StateReject::kNoStamp, "actuator state has no stamp");
+  if (stamp > now + options_.stamp_tolerance)
+    return bad(StateReject::kStampFuture,
+               "actuator state stamped " + std::to_string(stamp - now) + " s after the pool's clock");
+  if (now - stamp > options_.state_timeout)
+    return bad(StateReject::kStale, "actuator state stamped " + std::to_string(now - stamp) +
+                                        " s ago (state_timeout " + std::to_string(options_.state_timeout) + " s)");
   const std::size_t n = names.empty() ? known_names_.size() : names.size();
-  if (pressure.size() != n) return bad("actuator state has " + std::to_string(pressure.size()) + " pressures for " +
-                                       std::to_string(n) + " cylinders");
-  if (!length.empty() && length.size() != n) return bad("actuator state length[] has the wrong size");
-  if (!length_rate.empty() && length_rate.size() != n) return bad("actuator state length_rate[] has the wrong size");
-  if (!std::isfinite(supply)) {
-    ++counters_.states_rejected;
-    return {RejectReason::kNonFinite, "actuator state supply pressure is not finite"};
-  }
-  // Validate every entry of ours before touching any state, so a bad message changes nothing.
-  std::vector<std::pair<int, std::size_t>> ours;
+  if (pressure.size() != n)
+    return bad(StateReject::kLength, "actuator state has " + std::to_string(pressure.size()) + " pressures for " +
+                                         std::to_string(n) + " cylinders");
+  if (!length.empty() && length.size() != n) return bad(StateReject::kLength, "actuator state length[] has the wrong size");
+  if (!length_rate.empty() && length_rate.size() != n)
+    return bad(StateReject::kLength, "actuator state length_rate[] has the wrong size");
+  if (!std::isfinite(supply)) return bad(StateReject::kNonFinite, "actuator state supply pressure is not finite");
+  // Validate every entry before touching any state, so a bad message changes nothing.
+  ours_.clear();
+  ++seen_mark_;
   for (std::size_t j = 0; j < n; ++j) {
-    const auto it = slot_.find(names.empty() ? known_names_[j] : names[j]);
-    if (it == slot_.end() || it->second < 0) continue;
-    const double x = length.empty() ? 0.0 : length[j], xd = length_rate.empty() ? 0.0 : length_rate[j];
-    if (!std::isfinite(pressure[j]) || !std::isfinite(x) || !std::isfinite(xd)) {
-      ++counters_.states_rejected;
-      return {RejectReason::kNonFinite, "actuator state of '" + cylinders_[it->second].name + "' is not finite"};
+    std::size_t known = j;
+    if (!names.empty()) {
+      const auto it = known_index_.find(names[j]);
+      if (it == known_index_.end()) {
+        verdict.unknown_names = true;  // another model's cylinder: skipped, reported
+        continue;
+      }
+      known = it->second;
+      if (seen_[known] == seen_mark_)
+        return bad(StateReject::kDuplicateName, "actuator state names '" + names[j] + "' twice");
+      seen_[known] = seen_mark_;
     }
-    ours.emplace_back(it->second, j);
+    const int slot = slot_of_known_[known];
+    if (slot < 0) continue;
+    const double x = length.empty() ? 0.0 : length[j], xd = length_rate.empty() ? 0.0 : length_rate[j];
+    if (!std::isfinite(pressure[j]) || !std::isfinite(x) || !std::isfinite(xd))
+      return bad(StateReject::kNonFinite, "actuator state of '" + cylinders_[slot].name + "' is not finite");
+    ours_.emplace_back(slot, j);
   }
-  for (const auto& [slot, j] : ours) {
+  // Valve indices: fixed by the first state that has all of ours; a later state must have
+  // them at the same places, or commands by index would reach the wrong cylinders.
+  if (indices_resolved_.load(std::memory_order_relaxed)) {
+    for (const auto& [slot, j] : ours_) {
+      if (static_cast<int>(j) != valve_index_[slot])
+        return bad(StateReject::kNameOrder, "actuator state has '" + cylinders_[slot].name + "' at " +
+                                                std::to_string(j) + ", the valve commands address it as " +
+                                                std::to_string(valve_index_[slot]));
+    }
+  }
+  for (const auto& [slot, j] : ours_) {
     const PoolCylinder& c = cylinders_[slot];
-    State& s = states_[slot];
+    State& s = input_states_[slot];
     s.valid = true;
-    s.received = now;
+    s.stamp = stamp;
     s.pressure = pressure[j];
     s.inputs.volume = c.dead_volume + c.bore_area * std::max(0.0, length.empty() ? 0.0 : length[j]);
     s.inputs.volume_rate = c.bore_area * (length_rate.empty() ? 0.0 : length_rate[j]);
     s.inputs.supply = std::max(supply, options_.atmosphere);
     s.inputs.room = options_.atmosphere;
   }
-  ++counters_.states_accepted;
-  return {};
+  if (!indices_resolved_.load(std::memory_order_relaxed) && ours_.size() == size()) {
+    for (const auto& [slot, j] : ours_) valve_index_[slot] = static_cast<int>(j);
+    indices_resolved_.store(true, std::memory_order_release);
+  }
+  state_box_.back() = input_states_;  // same size every time: no allocation
+  state_box_.publish();
+  return verdict;
 }
 
 const std::vector<double>& CylinderPool::update(double now) {
-  ++counters_.ticks;
-  exhausting_ = 0;
+  ticks_.fetch_add(1, std::memory_order_relaxed);
+  plan_box_.take();  // the newest inputs, if any arrived since the last tick
+  state_box_.take();
+  const std::vector<Plan>& plans = plan_box_.front();
+  const std::vector<State>& states = state_box_.front();
+  std::size_t exhausting = 0;
   double solve_seconds = 0;
   bool driven = false;
   const double dt_ctrl = options_.controller == "ilqg" ? options_.ilqg.dt : 0.005;
   for (std::size_t i = 0; i < size(); ++i) {
-    Plan& plan = plans_[i];
-    const State& state = states_[i];
-    if (plan.valid && now - plan.received > options_.reference_timeout) {
-      plan.valid = false;
-      ++counters_.reference_timeouts;
+    const Plan& plan = plans[i];
+    const State& state = states[i];
+    bool planned = plan.valid && plan.serial != expired_serial_[i];
+    if (planned && now - plan.received > options_.reference_timeout) {
+      expired_serial_[i] = plan.serial;  // counted once, even if the input thread hands it over again
+      planned = false;
+      reference_timeouts_.fetch_add(1, std::memory_order_relaxed);
     }
-    const bool fresh_state = state.valid && now - state.received <= options_.state_timeout;
+    const bool fresh_state = state.valid && now - state.stamp <= options_.state_timeout;
     double u = std::numeric_limits<double>::quiet_NaN();
-    if (plan.valid && fresh_state) {
+    if (planned && fresh_state) {
       resampleReference(plan.pressure.data(), static_cast<int>(plan.pressure.size()), plan.dt, now - plan.t0, dt_ctrl,
                         static_cast<int>(ref_buffer_.size()), ref_buffer_.data());
       ControlStats stats;
@@ -198,12 +282,12 @@ const std::vector<double>& CylinderPool::update(double now) {
                                   static_cast<int>(ref_buffer_.size()), dt_ctrl, &stats);
       solve_seconds += watch.elapsed();
       driven = true;
-      if (stats.rejected) ++counters_.solver_rejections;
-      if (!std::isfinite(u)) ++counters_.nonfinite_commands;
+      if (stats.rejected) solver_rejections_.fetch_add(1, std::memory_order_relaxed);
+      if (!std::isfinite(u)) nonfinite_commands_.fetch_add(1, std::memory_order_relaxed);
       const double e = state.pressure - ref_buffer_[0];
-      pressure_sq_ += e * e;
-      force_sq_ += e * e * cylinders_[i].bore_area * cylinders_[i].bore_area;
-      ++tracking_n_;
+      pending_.pressure_sq += e * e;
+      pending_.force_sq += e * e * cylinders_[i].bore_area * cylinders_[i].bore_area;
+      ++pending_.tracking_n;
     }
     if (std::isfinite(u)) {
       commands_[i] = std::clamp(u, -kValveLimit, kValveLimit);
@@ -214,26 +298,60 @@ const std::vector<double>& CylinderPool::update(double now) {
       if (active_[i]) controllers_[i]->reset();
       active_[i] = 0;
       commands_[i] = options_.exhaust_volts;
-      ++exhausting_;
+      ++exhausting;
     }
   }
-  if (driven) solve_.add(solve_seconds);
+  exhausting_.store(exhausting, std::memory_order_relaxed);
+  if (driven && pending_.solve_n < Pending::kCapacity) pending_.solve[pending_.solve_n++] = solve_seconds;
+  mergeStatistics();
   return commands_;
+}
+
+void CylinderPool::mergeStatistics() {
+  // Never wait for the monitoring thread: if it holds the lock, keep the samples pending.
+  std::unique_lock<std::mutex> lock(window_mutex_, std::try_to_lock);
+  if (!lock.owns_lock()) return;
+  for (std::size_t k = 0; k < pending_.solve_n && window_solve_.size() < window_solve_.capacity(); ++k)
+    window_solve_.push_back(pending_.solve[k]);  // within the reserved capacity: no allocation
+  window_force_sq_ += pending_.force_sq;
+  window_pressure_sq_ += pending_.pressure_sq;
+  window_tracking_n_ += pending_.tracking_n;
+  pending_ = Pending{};
+}
+
+PoolCounters CylinderPool::counters() const {
+  PoolCounters c;
+  c.ticks = ticks_.load(std::memory_order_relaxed);
+  c.nonfinite_commands = nonfinite_commands_.load(std::memory_order_relaxed);
+  c.solver_rejections = solver_rejections_.load(std::memory_order_relaxed);
+  c.reference_timeouts = reference_timeouts_.load(std::memory_order_relaxed);
+  return c;
+}
+
+void CylinderPool::recordPolicyLag(double seconds) {
+  const std::lock_guard<std::mutex> lock(lag_mutex_);
+  lag_.add(seconds);
 }
 
 PoolWindow CylinderPool::takeWindow() {
   PoolWindow w;
-  w.solve = solve_.summary();
-  w.lag = lag_.summary();
-  w.tracking_samples = tracking_n_;
-  if (tracking_n_ > 0) {
-    w.force_rmse = std::sqrt(force_sq_ / tracking_n_);
-    w.pressure_rmse = std::sqrt(pressure_sq_ / tracking_n_);
+  SampleStats solve;  // summarised outside the lock (sorting a copy allocates: not the tick's concern)
+  {
+    const std::lock_guard<std::mutex> lock(window_mutex_);
+    for (double x : window_solve_) solve.add(x);
+    window_solve_.clear();  // keeps the capacity
+    w.tracking_samples = window_tracking_n_;
+    if (window_tracking_n_ > 0) {
+      w.force_rmse = std::sqrt(window_force_sq_ / window_tracking_n_);
+      w.pressure_rmse = std::sqrt(window_pressure_sq_ / window_tracking_n_);
+    }
+    window_force_sq_ = window_pressure_sq_ = 0;
+    window_tracking_n_ = 0;
   }
-  solve_.clear();
+  w.solve = solve.summary();
+  const std::lock_guard<std::mutex> lock(lag_mutex_);
+  w.lag = lag_.summary();
   lag_.clear();
-  force_sq_ = pressure_sq_ = 0;
-  tracking_n_ = 0;
   return w;
 }
 

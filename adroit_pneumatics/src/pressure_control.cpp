@@ -9,14 +9,13 @@
 namespace adroit::pneumatics {
 
 namespace {
-constexpr double kMPa = 1e-6;
 const double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 bool allFinite(const std::vector<double>& v) {
   return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x); });
 }
 
-// Parametric model in MPa with inputs frozen over the horizon (v, vdot are sensor inputs,
+// Parametric model (Pa) with inputs frozen over the horizon (v, vdot are sensor inputs,
 // 5.5.5), the model's input dead time (the previous command w acts for the first td of each
 // step), and the offset-free disturbance: a constant pressure-rate bias d added to the model,
 // which over one step adds d * dt (the controller estimates d from its one-step prediction
@@ -24,15 +23,15 @@ bool allFinite(const std::vector<double>& v) {
 class ParametricDynamics : public ScalarDynamics {
  public:
   ParametricDynamics(const ParametricModel& m, const ParametricInputs& in, double dt, double bias_pa_per_s = 0.0)
-      : m_(m), in_(in), dt_(dt), bias_(bias_pa_per_s * dt * kMPa), td_(std::min(m.params().td, dt)),
+      : m_(m), in_(in), dt_(dt), bias_(bias_pa_per_s * dt), td_(std::min(m.params().td, dt)),
         inv_tau_(1.0 / m.tau(in)), c5v_(m.params().c5 * in.volume_rate * 1e6) {}
   double step(double p, double u, double* dp, double* du) const override {
-    if (!dp && !du) return exact<false>(p / kMPa, terms(u), dt_, nullptr, nullptr) * kMPa + bias_;
+    if (!dp && !du) return exact<false>(p, terms(u), dt_, nullptr, nullptr) + bias_;
     double a, b;
-    const double next = exact<true>(p / kMPa, terms(u), dt_, &a, &b);
+    const double next = exact<true>(p, terms(u), dt_, &a, &b);
     if (dp) *dp = a;
-    if (du) *du = b * kMPa;
-    return next * kMPa + bias_;
+    if (du) *du = b;
+    return next + bias_;
   }
   // Same formulas as ParametricModel::stepDelayed / step, with the command terms s(u),
   // r(u) cached: in a rollout w_i = u_{i-1}, so each command's terms are computed once.
@@ -42,23 +41,23 @@ class ParametricDynamics : public ScalarDynamics {
       return step(p, u, dp, du);
     }
     if (!dp && !dw && !du) {  // rollout: values only
-      const double mid = exact<false>(p / kMPa, terms(w), td_, nullptr, nullptr);
-      if (td_ >= dt_) return mid * kMPa + bias_;
-      return exact<false>(mid, terms(u), dt_ - td_, nullptr, nullptr) * kMPa + bias_;
+      const double mid = exact<false>(p, terms(w), td_, nullptr, nullptr);
+      if (td_ >= dt_) return mid + bias_;
+      return exact<false>(mid, terms(u), dt_ - td_, nullptr, nullptr) + bias_;
     }
     double a1, b1, a2, b2;
-    const double mid = exact<true>(p / kMPa, terms(w), td_, &a1, &b1);
+    const double mid = exact<true>(p, terms(w), td_, &a1, &b1);
     if (td_ >= dt_) {
       if (dp) *dp = a1;
-      if (dw) *dw = b1 * kMPa;
+      if (dw) *dw = b1;
       if (du) *du = 0.0;
-      return mid * kMPa + bias_;
+      return mid + bias_;
     }
     const double next = exact<true>(mid, terms(u), dt_ - td_, &a2, &b2);
     if (dp) *dp = a2 * a1;
-    if (dw) *dw = a2 * b1 * kMPa;
-    if (du) *du = b2 * kMPa;
-    return next * kMPa + bias_;
+    if (dw) *dw = a2 * b1;
+    if (du) *du = b2;
+    return next + bias_;
   }
 
  private:
@@ -131,6 +130,11 @@ void IlqgParams::validate() const {
     throw std::invalid_argument("ilqg: disturbance_limit must be finite and >= 0");
 }
 
+namespace {
+// The "limit, then hold" guess computes holding commands at every kHoldEvery-th sample.
+constexpr int kHoldEvery = 10;
+}  // namespace
+
 IlqgSolver::IlqgSolver(const IlqgParams& params) : params_(params) {
   params_.validate();
   const auto n = static_cast<std::size_t>(params_.horizon);
@@ -146,6 +150,11 @@ IlqgSolver::IlqgSolver(const IlqgParams& params) : params_(params) {
   p_try_ = p_;
   w_try_ = w_;
   u_try_ = u_;
+  u_start_ = u_;
+  p_alt_ = p_;
+  w_alt_ = w_;
+  u_alt_ = u_;
+  knots_.assign(n / kHoldEvery + 2, 0.0);
 }
 
 double IlqgSolver::rollout(const ScalarDynamics& f, double p0, double w0, const double* p_ref, const double* u_des,
@@ -218,7 +227,7 @@ bool IlqgSolver::backward(const double* p_ref, const double* u_des, double reg, 
 }
 
 void IlqgSolver::bangHoldGuess(const ScalarDynamics& f, double p0, double w0, const double* p_ref,
-                               std::vector<double>& u) const {
+                               std::vector<double>& u) {
   const int n = params_.horizon;
   // Holding command for a pressure level: the u whose step keeps p where it is (the step is
   // increasing in u), by bisection.
@@ -232,17 +241,15 @@ void IlqgSolver::bangHoldGuess(const ScalarDynamics& f, double p0, double w0, co
   };
   // Holding commands at every 10th sample, interpolated in between (the reference is smooth
   // between jumps, and a hold command costs a bisection).
-  constexpr int kEvery = 10;
-  std::vector<double> knots;
-  for (int i = 0; i < n + kEvery; i += kEvery) knots.push_back(hold(p_ref[std::min(i, n)]));
-  u.resize(n);
+  std::vector<double>& knots = knots_;  // n / kHoldEvery + 2 entries, allocated once
+  for (int i = 0, k = 0; i < n + kHoldEvery; i += kHoldEvery, ++k) knots[k] = hold(p_ref[std::min(i, n)]);
   const int direction = p_ref[0] > p0 ? 1 : -1;
   double p = p0, w = w0;
   bool racing = true;
   for (int i = 0; i < n; ++i) {
     racing = racing && (p_ref[i] - p) * direction > 0;
-    const int a = i / kEvery;
-    const double f_i = (i % kEvery) / static_cast<double>(kEvery);
+    const int a = i / kHoldEvery;
+    const double f_i = (i % kHoldEvery) / static_cast<double>(kHoldEvery);
     u[i] = racing ? (direction > 0 ? params_.u_max : params_.u_min) : knots[a] + f_i * (knots[a + 1] - knots[a]);
     p = f.stepWithMemory(p, w, u[i], nullptr, nullptr, nullptr);
     w = u[i];
@@ -250,27 +257,27 @@ void IlqgSolver::bangHoldGuess(const ScalarDynamics& f, double p0, double w0, co
 }
 
 bool IlqgSolver::solve(const ScalarDynamics& f, double p0, double w0, const double* p_ref, const double* u_des,
-                       const std::vector<double>& u_init, int iterations) {
+                       const double* u_init, int n_init, int iterations) {
+  // Only the preallocated workspaces are used (swapped, never resized): the first rollout
+  // goes into the *_try_ buffers, the jump guess into the *_alt_ ones.
   const int n = params_.horizon;
-  std::vector<double> u0(n);
-  for (int i = 0; i < n; ++i) u0[i] = i < static_cast<int>(u_init.size()) ? u_init[i] : u_des[i];
-  std::vector<double> p(n + 1), w(n + 1), u(n);
-  double cost = rollout(f, p0, w0, p_ref, u_des, u0, -1.0, p, w, u);
+  for (int i = 0; i < n; ++i) u_start_[i] = i < n_init ? u_init[i] : u_des[i];
+  double cost = rollout(f, p0, w0, p_ref, u_des, u_start_, -1.0, p_try_, w_try_, u_try_);
   if (params_.jump_threshold > 0 && std::abs(p_ref[0] - p0) > params_.jump_threshold) {
     iterations = std::max(iterations, params_.jump_iterations);
-    bangHoldGuess(f, p0, w0, p_ref, u_try_);
-    const double c = rollout(f, p0, w0, p_ref, u_des, u_try_, -1.0, p_try_, w_try_, u_try_);
+    bangHoldGuess(f, p0, w0, p_ref, u_start_);  // u_start_ is free again: rolled out above
+    const double c = rollout(f, p0, w0, p_ref, u_des, u_start_, -1.0, p_alt_, w_alt_, u_alt_);
     if (std::isfinite(c) && (c < cost || !std::isfinite(cost))) {
       cost = c;
-      p.swap(p_try_);
-      w.swap(w_try_);
-      u.swap(u_try_);
+      p_try_.swap(p_alt_);
+      w_try_.swap(w_alt_);
+      u_try_.swap(u_alt_);
     }
   }
   if (!std::isfinite(cost)) return false;
-  p_.swap(p);
-  w_.swap(w);
-  u_.swap(u);
+  p_.swap(p_try_);
+  w_.swap(w_try_);
+  u_.swap(u_try_);
   double reg = 0.0;
   // Gains of the last successful backward pass are kept for the policy (standard iLQG: the
   // policy is u_new + K (x - x_new) with K from the pass that produced u_new); only when no
@@ -312,12 +319,22 @@ bool IlqgSolver::solve(const ScalarDynamics& f, double p0, double w0, const doub
 
 IlqgPressureController::IlqgPressureController(const ParametricModel& model, const IlqgParams& params,
                                                int solve_every)
-    : model_(model), solver_(params), solve_every_(std::max(1, solve_every)) {}
+    : model_(model), solver_(params), solve_every_(std::max(1, solve_every)) {
+  // Every buffer at its final size now, so that update() never allocates.
+  const auto n = static_cast<std::size_t>(solver_.params().horizon);
+  p_ref_.assign(n + 1, 0.0);
+  u_des_.assign(n + 1, 0.0);
+  warm_.assign(n, 0.0);
+  policy_.p.assign(n + 1, 0.0);
+  policy_.w.assign(n + 1, 0.0);
+  policy_.u.assign(n, 0.0);
+  policy_.kp.assign(n, 0.0);
+  policy_.kw.assign(n, 0.0);
+}
 
 void IlqgPressureController::reset() {
   tick_ = 0;
-  policy_ = Policy{};
-  warm_.clear();
+  policy_.valid = false;  // the buffers stay (no allocation when the cylinder is driven again)
   have_last_ = false;
   disturbance_ = 0.0;
 }
@@ -358,7 +375,7 @@ double IlqgPressureController::evaluate(double t, double p_meas, double w_last) 
   const int i = static_cast<int>(std::floor((t - policy_.t0) / policy_.dt + 1e-6));
   if (i < 0 || i >= n) return kNaN;
   const IlqgParams& prm = solver_.params();
-  const double dx_p = p_meas * kMPa - policy_.p[i], dx_w = w_last - policy_.w[i];
+  const double dx_p = p_meas - policy_.p[i], dx_w = w_last - policy_.w[i];
   const double u = policy_.u[i] + prm.feedback_fraction * (policy_.kp[i] * dx_p + policy_.kw[i] * dx_w);
   return std::isfinite(u) ? std::clamp(u, prm.u_min, prm.u_max) : kNaN;
 }
@@ -372,26 +389,21 @@ double IlqgPressureController::update(double t, double p_meas, double w_last, co
   const bool due = (tick_++ % solve_every_) == 0 || !policy_.valid;
   if (due && n_ref > 0 && std::isfinite(p_meas) && std::isfinite(w_last)) {
     const auto start = std::chrono::steady_clock::now();
-    p_ref_mpa_.resize(n + 1);
-    u_des_.resize(n + 1);
-    resampleReference(p_ref, n_ref, dt_ref, 0.0, prm.dt, n + 1, p_ref_mpa_.data());
+    resampleReference(p_ref, n_ref, dt_ref, 0.0, prm.dt, n + 1, p_ref_.data());
     // Warm start: previous controls shifted by the time elapsed since that solve.
-    warm_.clear();
-    if (policy_.valid) {
+    const bool warm = policy_.valid;
+    if (warm) {
       const int shift = static_cast<int>(std::lround((t - policy_.t0) / prm.dt));
-      for (int i = 0; i < n; ++i) {
-        const int j = std::min(std::max(i + shift, 0), n - 1);
-        warm_.push_back(policy_.u[j]);
-      }
+      for (int i = 0; i < n; ++i) warm_[i] = policy_.u[std::min(std::max(i + shift, 0), n - 1)];
     }
     if (prm.u_des_steady_state) {
       // Model steady-state inverse of the reference. Smooth in time, so solved every 10th
       // sample and interpolated.
       constexpr int kEvery = 10;
       for (int i = 0; i <= n; i += kEvery)
-        u_des_[i] = model_.inverseSteadyState(p_ref_mpa_[i], in, prm.u_min, prm.u_max);
+        u_des_[i] = model_.inverseSteadyState(p_ref_[i], in, prm.u_min, prm.u_max);
       const int last = (n / kEvery) * kEvery;
-      if (last != n) u_des_[n] = model_.inverseSteadyState(p_ref_mpa_[n], in, prm.u_min, prm.u_max);
+      if (last != n) u_des_[n] = model_.inverseSteadyState(p_ref_[n], in, prm.u_min, prm.u_max);
       for (int i = 0; i <= n; ++i) {
         if (i % kEvery != 0 && i != n) {
           const int a = (i / kEvery) * kEvery, b = std::min(a + kEvery, n);
@@ -401,12 +413,13 @@ double IlqgPressureController::update(double t, double p_meas, double w_last, co
     } else {
       // Proximal: stay near the previous plan (or the applied command before the first
       // solve). It cannot bias where the plan settles, only how far one solve moves it.
-      for (int i = 0; i <= n; ++i) u_des_[i] = warm_.empty() ? w_last : warm_[std::min(i, n - 1)];
+      for (int i = 0; i <= n; ++i) u_des_[i] = warm ? warm_[std::min(i, n - 1)] : w_last;
     }
-    for (int i = 0; i <= n; ++i) p_ref_mpa_[i] *= kMPa;
     const ParametricDynamics dyn(model_, in, prm.dt, disturbance_);
-    const bool ok = solver_.solve(dyn, p_est_ * kMPa, w_last, p_ref_mpa_.data(), u_des_.data(), warm_, prm.iterations);
+    const bool ok = solver_.solve(dyn, p_est_, w_last, p_ref_.data(), u_des_.data(), warm_.data(), warm ? n : 0,
+                                  prm.iterations);
     if (ok) {
+      // Copies into buffers of the same size: no allocation.
       policy_.valid = true;
       policy_.t0 = t;
       policy_.dt = prm.dt;
@@ -453,7 +466,7 @@ double PidfController::update(double t, double p_meas, double /*w_last*/, const 
                               const double* p_ref, int n_ref, double /*dt_ref*/, ControlStats* stats) {
   if (stats) *stats = ControlStats{};
   if (n_ref < 1 || !std::isfinite(p_meas) || !std::isfinite(p_ref[0])) return kNaN;
-  const double e = (p_ref[0] - p_meas) * kMPa;
+  const double e = p_ref[0] - p_meas;  // Pa (the gains are per Pa)
   const double dt = started_ ? t - last_t_ : 0.0;
   if (started_ && dt > 0) {
     const double raw = (e - last_error_) / dt;

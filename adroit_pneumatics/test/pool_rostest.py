@@ -4,10 +4,12 @@
 The test node plays the driver: it publishes /adroit/actuator_states at 200 Hz from a
 first-order pressure response to the valve commands the pool sends (so the loop closes)
 and force references as the behaviour MPC would. It checks that the pool commands exactly
-its cylinders at 200 Hz with finite values in [-5, 5], tracks the reference, rejects bad
-references (counted in /adroit/diagnostics) while it keeps commanding from the last valid
-plan, exhausts after the reference timeout, and that a bad configuration stops the node
-with one line naming the field.
+its cylinders at 200 Hz with finite values in [-5, 5], by index into the actuator-state
+order, tracks the reference, rejects bad references (NaN, wrong length, unknown name, stamps
+far from the clock) and stale actuator states, each counted by reason in /adroit/diagnostics,
+counts negative forces it clamps, keeps commanding from the last valid plan, exhausts after
+the reference timeout, and that a bad configuration stops the node with one line naming the
+field.
 """
 import math
 import os
@@ -53,6 +55,7 @@ class PoolTest(unittest.TestCase):
         cls.timeout = rospy.get_param("~reference_timeout")
         # Cylinders of other pools: their states (NaN!) and references must not disturb this pool.
         cls.others = ["A_MFJ2_flex", "A_THJ1_ext"]
+        cls.state_names = cls.pool + cls.others  # the order valve command indices refer to
         cls.lock = threading.Lock()
         cls.plant = FirstOrderPlant(len(cls.pool))
         cls.commands = []  # (receipt time, msg)
@@ -74,7 +77,8 @@ class PoolTest(unittest.TestCase):
     def on_command(cls, msg):
         with cls.lock:
             cls.commands.append((time.monotonic(), msg))
-            for name, v in zip(msg.name, msg.volts):
+            names = [cls.state_names[i] for i in msg.index] if msg.index else msg.name
+            for name, v in zip(names, msg.volts):
                 if name in cls.pool and math.isfinite(v):
                     cls.plant.u[cls.pool.index(name)] = max(-5.0, min(5.0, v))
 
@@ -95,7 +99,7 @@ class PoolTest(unittest.TestCase):
             last = now
             msg = ActuatorStates()
             msg.header.stamp = rospy.Time.now()
-            msg.name = cls.pool + cls.others
+            msg.name = cls.state_names
             n = len(msg.name)
             msg.pressure = p + [float("nan")] * len(cls.others)
             msg.length = [0.01] * n
@@ -110,10 +114,10 @@ class PoolTest(unittest.TestCase):
                 return
 
     # --- helpers -------------------------------------------------------------------------
-    def reference(self, forces, steps=20, dt=0.01, names=None, flat=None):
+    def reference(self, forces, steps=20, dt=0.01, names=None, flat=None, shift=0.0):
         names = names if names is not None else self.pool + self.others
         msg = ForceReference()
-        msg.header.stamp = rospy.Time.now()
+        msg.header.stamp = rospy.Time.now() + rospy.Duration(shift)
         msg.dt = dt
         msg.steps = steps
         msg.name = names
@@ -165,9 +169,10 @@ class PoolTest(unittest.TestCase):
         self.assertLess(max(gaps), 5 * 1.0 / RATE, "a gap of more than 5 periods")
 
         for m in window:
-            self.assertEqual(sorted(m.name), sorted(self.pool))
-            self.assertEqual(len(m.name), len(self.pool))
-            self.assertEqual(len(m.index), 0)
+            # By index (resolved once from the actuator-state order), not by name.
+            self.assertEqual(len(m.name), 0)
+            self.assertEqual(sorted(self.state_names[i] for i in m.index), sorted(self.pool))
+            self.assertEqual(len(m.index), len(self.pool))
             self.assertEqual(len(m.volts), len(self.pool))
             for v in m.volts:
                 self.assertTrue(math.isfinite(v))
@@ -186,11 +191,24 @@ class PoolTest(unittest.TestCase):
             rospy.loginfo("%s: force %.2f N for reference %.2f N", name, force, f)
             self.assertAlmostEqual(force, f, delta=0.25 * f, msg=name)
 
-        # Bad references: NaN, wrong length, unknown name. The pool keeps its last plan.
+        # A negative force is clamped to 0 N (and counted); this is the last valid reference.
         t_bad = time.monotonic()
+        self.reference([-3.0] + forces[1:])
+        # Bad references: NaN, wrong length, unknown name, a stamp 10 s ahead of the clock
+        # (e.g. wall time under sim time), one whose trajectory ended 5 s ago. The pool keeps
+        # its last plan.
         self.reference([float("nan")] + forces[1:])
         self.reference(forces, flat=[1.0, 2.0, 3.0])
         self.reference(forces[:3], names=["A_FFJ2_flex", "A_NOSUCH_flex", "A_ARJ1_flex"])
+        self.reference(forces, shift=10.0)
+        self.reference(forces, shift=-5.0)
+        # An actuator state measured 1 s ago is stale on arrival: rejected, counted.
+        stale = ActuatorStates()
+        stale.header.stamp = rospy.Time.now() - rospy.Duration(1.0)
+        stale.name = self.state_names
+        stale.pressure = [ATM] * len(self.state_names)
+        stale.supply_pressure = SUPPLY
+        self.state_pub.publish(stale)
         time.sleep(0.35)
         kept = self.commands_between(t_bad + 0.05, t_bad + 0.3)
         self.assertGreater(len(kept), 0.25 * RATE * 0.8)
@@ -211,12 +229,20 @@ class PoolTest(unittest.TestCase):
             if s is None:
                 return False
             kv = {x.key: x.value for x in s.values}
-            return int(kv.get("references_rejected", "0")) >= 3
+            return (int(kv.get("references_rejected_total", "0")) >= 5 and
+                    int(kv.get("states_rejected_stale", "0")) >= 1)
         self.wait_for(counted, 3.0, "diagnostics with the rejections")
         kv = {x.key: x.value for x in self.latest_status().values}
         self.assertEqual(kv["references_rejected_non_finite"], "1")
         self.assertEqual(kv["references_rejected_length"], "1")
         self.assertEqual(kv["references_rejected_unknown_name"], "1")
+        self.assertEqual(kv["references_rejected_stamp_future"], "1")
+        self.assertEqual(kv["references_rejected_stamp_past"], "1")
+        self.assertEqual(kv["references_rejected_total"], "5")
+        self.assertEqual(kv["references_clamped_negative"], "1")
+        self.assertGreaterEqual(int(kv["states_rejected_stale"]), 1)
+        self.assertEqual(kv["states_rejected_duplicate_name"], "0")
+        self.assertEqual(kv["addressing"], "index")
         self.assertEqual(kv["nonfinite_commands"], "0")
         for key in ("solve_time", "policy_lag", "tracking_rmse_N", "publish_rate_hz"):
             self.assertIn(key, kv)

@@ -1,5 +1,7 @@
-// CylinderPool without ROS: reference validation, fail-safe exhaust, closed-loop force
-// tracking against a plant, and the default pool split of the real model.
+// CylinderPool without ROS: reference and state validation (shape, names, stamps against
+// the pool's clock), fail-safe exhaust, valve indices, the hand-over between threads,
+// closed-loop force tracking against a plant, and the default pool split of the real model.
+#include <array>
 #include <cmath>
 #include <limits>
 #include <set>
@@ -35,7 +37,7 @@ CylinderPool makePool(const std::string& controller = "ilqg", double reference_t
 // State for all model cylinders in model order; the pool's two at pressure p.
 void feedState(CylinderPool& pool, double now, double p) {
   const std::vector<double> pressure(kModel.size(), p), length(kModel.size(), 0.01), rate(kModel.size(), 0.0);
-  ASSERT_TRUE(pool.setState(now, {}, pressure, length, rate, 620e3).ok());
+  ASSERT_TRUE(pool.setState(now, now, {}, pressure, length, rate, 620e3).ok());
 }
 
 Verdict constantReference(CylinderPool& pool, double now, double f_flex, double f_ext) {
@@ -78,39 +80,169 @@ TEST(Pool, ExhaustsWithoutReferenceOrState) {
   EXPECT_TRUE(allExhaust(pool2.update(0.005)));  // reference but no state
 }
 
-TEST(Pool, BadReferencesAreRejectedAndCounted) {
+TEST(Pool, BadReferencesAreRejectedWithTheirReason) {
   CylinderPool pool = makePool();
   const std::vector<std::string> two = {"A_FFJ2_flex", "A_FFJ2_ext"};
-  EXPECT_EQ(pool.setReference(0, 0, 0.01, 2, two, {1, 2, kNaN, 4}).reason, RejectReason::kNonFinite);
-  EXPECT_EQ(pool.setReference(0, 0, 0.01, 2, two, {1, std::numeric_limits<double>::infinity(), 3, 4}).reason,
+  // (The node counts the verdicts by reason, one counter each, in its diagnostics.)
+  std::array<int, static_cast<int>(RejectReason::kCount)> count{};
+  auto check = [&](const Verdict& v) {
+    ++count[static_cast<int>(v.reason)];
+    EXPECT_FALSE(v.ignored);
+    EXPECT_EQ(v.ok(), v.detail.empty());
+    return v.reason;
+  };
+  EXPECT_EQ(check(pool.setReference(0, 0, 0.01, 2, two, {1, 2, kNaN, 4})), RejectReason::kNonFinite);
+  EXPECT_EQ(check(pool.setReference(0, 0, 0.01, 2, two, {1, std::numeric_limits<double>::infinity(), 3, 4})),
             RejectReason::kNonFinite);
-  EXPECT_EQ(pool.setReference(0, 0, 0.01, 2, two, {1, 2, 3}).reason, RejectReason::kLength);
-  EXPECT_EQ(pool.setReference(0, 0, 0.01, 0, two, {}).reason, RejectReason::kLength);
-  EXPECT_EQ(pool.setReference(0, 0, 0.01, 1, {"A_FFJ2_flex", "A_NOPE_ext"}, {1, 2}).reason,
+  EXPECT_EQ(check(pool.setReference(0, 0, 0.01, 2, two, {1, 2, 3})), RejectReason::kLength);
+  EXPECT_EQ(check(pool.setReference(0, 0, 0.01, 0, two, {})), RejectReason::kLength);
+  EXPECT_EQ(check(pool.setReference(0, 0, 0.01, 1, {"A_FFJ2_flex", "A_NOPE_ext"}, {1, 2})),
             RejectReason::kUnknownName);
-  EXPECT_EQ(pool.setReference(0, 0, 0.01, 1, {"A_FFJ2_flex", "A_FFJ2_flex"}, {1, 2}).reason,
+  EXPECT_EQ(check(pool.setReference(0, 0, 0.01, 1, {"A_FFJ2_flex", "A_FFJ2_flex"}, {1, 2})),
             RejectReason::kDuplicateName);
-  EXPECT_EQ(pool.setReference(0, 0, 0.0, 2, two, {1, 2, 3, 4}).reason, RejectReason::kTiming);
-  EXPECT_EQ(pool.setReference(0, kNaN, 0.01, 1, two, {1, 2}).reason, RejectReason::kTiming);
-  const PoolCounters& c = pool.counters();
-  EXPECT_EQ(c.rejectedTotal(), 8u);
-  EXPECT_EQ(c.references_rejected[static_cast<int>(RejectReason::kNonFinite)], 2u);
-  EXPECT_EQ(c.references_rejected[static_cast<int>(RejectReason::kLength)], 2u);
-  EXPECT_EQ(c.references_accepted, 0u);
+  EXPECT_EQ(check(pool.setReference(0, 0, 0.0, 2, two, {1, 2, 3, 4})), RejectReason::kTiming);
+  EXPECT_EQ(check(pool.setReference(0, kNaN, 0.01, 1, two, {1, 2})), RejectReason::kTiming);
+  EXPECT_EQ(count[static_cast<int>(RejectReason::kNone)], 0);
+  EXPECT_EQ(count[static_cast<int>(RejectReason::kNonFinite)], 2);
+  EXPECT_EQ(count[static_cast<int>(RejectReason::kLength)], 2);
   // A reference for other pools only is valid but not ours.
-  EXPECT_TRUE(pool.setReference(0, 0, 0.01, 1, {"A_MFJ2_flex"}, {1}).ok());
-  EXPECT_EQ(c.references_ignored, 1u);
-  EXPECT_EQ(c.references_accepted, 0u);
+  const Verdict other = pool.setReference(0, 0, 0.01, 1, {"A_MFJ2_flex"}, {1});
+  EXPECT_TRUE(other.ok());
+  EXPECT_TRUE(other.ignored);
+  // Nothing of all that became a plan.
+  feedState(pool, 0.0, kAtm);
+  EXPECT_TRUE(allExhaust(pool.update(0.005)));
 }
 
 TEST(Pool, BadStatesAreRejectedAndChangeNothing) {
   CylinderPool pool = makePool();
-  EXPECT_FALSE(pool.setState(0, {}, {kAtm, kAtm}, {}, {}, 620e3).ok());  // 2 pressures for 5 cylinders
-  EXPECT_FALSE(pool.setState(0, {"A_FFJ2_flex"}, {kNaN}, {}, {}, 620e3).ok());
-  EXPECT_FALSE(pool.setState(0, {"A_FFJ2_flex"}, {kAtm}, {}, {}, kNaN).ok());
+  EXPECT_EQ(pool.setState(0, 0, {}, {kAtm, kAtm}, {}, {}, 620e3).reason, StateReject::kLength);  // 2 pressures, 5 cylinders
+  EXPECT_EQ(pool.setState(0, 0, {"A_FFJ2_flex"}, {kNaN}, {}, {}, 620e3).reason, StateReject::kNonFinite);
+  EXPECT_EQ(pool.setState(0, 0, {"A_FFJ2_flex"}, {kAtm}, {}, {}, kNaN).reason, StateReject::kNonFinite);
   // NaN in another pool's cylinder is not this pool's business.
-  EXPECT_TRUE(pool.setState(0, {"A_MFJ2_flex", "A_FFJ2_flex"}, {kNaN, kAtm}, {}, {}, 620e3).ok());
-  EXPECT_EQ(pool.counters().states_rejected, 3u);
+  EXPECT_TRUE(pool.setState(0, 0, {"A_MFJ2_flex", "A_FFJ2_flex"}, {kNaN, kAtm}, {}, {}, 620e3).ok());
+}
+
+// A stamp far from the pool's clock: a wall-clock stamp while the pool runs on sim time, a
+// stamp in the future, a reference already over. Before, each was accepted and its last
+// sample held as a constant.
+TEST(Pool, ReferencesStampedFarFromTheClockAreRejected) {
+  CylinderPool pool = makePool();
+  const double now = 100.0;  // sim time
+  const double tol = pool.options().stamp_tolerance;
+  const std::vector<std::string> one = {"A_FFJ2_flex"};
+  const std::vector<double> ten(10, 5.0);
+  EXPECT_EQ(pool.setReference(now, 1.7e9, 0.01, 10, one, ten).reason, RejectReason::kStampFuture);  // wall clock
+  EXPECT_EQ(pool.setReference(now, now + 2 * tol, 0.01, 10, one, ten).reason, RejectReason::kStampFuture);
+  // 10 samples of 10 ms that ended 0.5 s ago; a single sample 2 tolerances old.
+  EXPECT_EQ(pool.setReference(now, now - 0.59, 0.01, 10, one, ten).reason, RejectReason::kStampPast);
+  EXPECT_EQ(pool.setReference(now, now - 2 * tol, 0.01, 1, one, {5.0}).reason, RejectReason::kStampPast);
+  // Sim-time stamps seen by a pool on wall time.
+  EXPECT_EQ(pool.setReference(1.7e9, now, 0.01, 10, one, ten).reason, RejectReason::kStampPast);
+  // None of them drives the cylinder.
+  feedState(pool, now, kAtm);
+  pool.update(now);
+  EXPECT_EQ(pool.exhausting(), 2u);
+  // Within the tolerance either way, and a long reference that started a while ago but
+  // still runs, are fine.
+  EXPECT_TRUE(pool.setReference(now, now + 0.5 * tol, 0.01, 10, one, ten).ok());
+  EXPECT_TRUE(pool.setReference(now, now - 0.5 * tol, 0.01, 1, one, {5.0}).ok());
+  EXPECT_TRUE(pool.setReference(now, now - 0.3, 0.01, 100, one, std::vector<double>(100, 5.0)).ok());
+  feedState(pool, now + 0.005, kAtm);
+  pool.update(now + 0.005);
+  EXPECT_EQ(pool.exhausting(), 1u);  // A_FFJ2_flex is driven, A_FFJ2_ext has no plan
+}
+
+TEST(Pool, StampToleranceIsValidated) {
+  PoolOptions o;
+  o.stamp_tolerance = 0.0;
+  try {
+    o.validate();
+    FAIL() << "stamp_tolerance 0 accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("stamp_tolerance"), std::string::npos) << e.what();
+  }
+}
+
+// Freshness is the state's header stamp, not the time it arrived.
+TEST(Pool, StateFreshnessUsesTheStamp) {
+  CylinderPool pool = makePool();
+  const double timeout = pool.options().state_timeout;
+  ASSERT_TRUE(constantReference(pool, 0.0, 5.0, 5.0).ok());
+  const std::vector<double> p(kModel.size(), 200e3);
+  // Measured at 0, delivered 0.6 timeouts later: accepted (still fresh on arrival) ...
+  ASSERT_TRUE(pool.setState(0.6 * timeout, 0.0, {}, p, {}, {}, 620e3).ok());
+  pool.update(0.6 * timeout);
+  EXPECT_EQ(pool.exhausting(), 0u);
+  // ... and stale one timeout after its stamp, however recently it arrived.
+  pool.update(1.2 * timeout);
+  EXPECT_EQ(pool.exhausting(), 2u);
+  // Stale already on arrival, stamped in the future, or without a stamp: rejected.
+  EXPECT_EQ(pool.setState(2 * timeout, 0.5 * timeout, {}, p, {}, {}, 620e3).reason, StateReject::kStale);
+  EXPECT_EQ(pool.setState(0.0, 1.7e9, {}, p, {}, {}, 620e3).reason, StateReject::kStampFuture);
+  EXPECT_EQ(pool.setState(0.0, kNaN, {}, p, {}, {}, 620e3).reason, StateReject::kNoStamp);
+  pool.update(2 * timeout);
+  EXPECT_EQ(pool.exhausting(), 2u);  // none of them counted as fresh
+}
+
+TEST(Pool, UnknownAndDuplicateStateNamesAreReported) {
+  CylinderPool pool = makePool();
+  // An unknown name is skipped (another model's cylinder) and reported; the rest is used.
+  const StateVerdict unknown = pool.setState(0, 0, {"A_FFJ2_flex", "A_NOPE_ext", "A_FFJ2_ext"}, {kAtm, kAtm, kAtm},
+                                             {}, {}, 620e3);
+  EXPECT_TRUE(unknown.ok());
+  EXPECT_TRUE(unknown.unknown_names);
+  // (Same places for ours: the first state fixed the valve indices.)
+  const StateVerdict clean =
+      pool.setState(0, 0, {"A_FFJ2_flex", "A_MFJ2_flex", "A_FFJ2_ext"}, {kAtm, kAtm, kAtm}, {}, {}, 620e3);
+  EXPECT_TRUE(clean.ok());
+  EXPECT_FALSE(clean.unknown_names);
+  // A repeated name is ambiguous: the whole message is rejected, ours or not.
+  EXPECT_EQ(pool.setState(0, 0, {"A_FFJ2_flex", "A_FFJ2_flex"}, {kAtm, 300e3}, {}, {}, 620e3).reason,
+            StateReject::kDuplicateName);
+  EXPECT_EQ(pool.setState(0, 0, {"A_FFJ2_flex", "A_MFJ2_flex", "A_MFJ2_flex"}, {kAtm, kAtm, kAtm}, {}, {}, 620e3)
+                .reason,
+            StateReject::kDuplicateName);
+}
+
+TEST(Pool, ValveIndicesComeFromTheStateOrder) {
+  CylinderPool pool = makePool();  // A_FFJ2_flex, A_FFJ2_ext
+  // A state without all of ours does not fix them.
+  ASSERT_TRUE(pool.setState(0, 0, {"A_FFJ2_flex"}, {kAtm}, {}, {}, 620e3).ok());
+  EXPECT_FALSE(pool.valveIndicesResolved());
+  const std::vector<std::string> order = {"A_MFJ2_ext", "A_FFJ2_ext", "A_ARJ0_flex", "A_FFJ2_flex"};
+  ASSERT_TRUE(pool.setState(0, 0, order, {kAtm, kAtm, kAtm, kAtm}, {}, {}, 620e3).ok());
+  ASSERT_TRUE(pool.valveIndicesResolved());
+  EXPECT_EQ(pool.valveIndices(), (std::vector<int>{3, 1}));
+  // The same order again is fine; another order would send commands to the wrong cylinders.
+  EXPECT_TRUE(pool.setState(0, 0, order, {kAtm, kAtm, kAtm, kAtm}, {}, {}, 620e3).ok());
+  EXPECT_EQ(pool.setState(0, 0, {"A_FFJ2_flex", "A_FFJ2_ext"}, {kAtm, kAtm}, {}, {}, 620e3).reason,
+            StateReject::kNameOrder);
+  EXPECT_EQ(pool.setState(0, 0, {}, std::vector<double>(kModel.size(), kAtm), {}, {}, 620e3).reason,
+            StateReject::kNameOrder);  // unnamed = model order: ours at 1 and 2
+  EXPECT_EQ(pool.valveIndices(), (std::vector<int>{3, 1}));
+}
+
+TEST(Handover, NewestValueWinsAndIsTakenOnce) {
+  LatestValue<int> box(0);
+  EXPECT_FALSE(box.take());
+  box.back() = 1;
+  box.publish();
+  box.back() = 2;
+  box.publish();
+  ASSERT_TRUE(box.take());
+  EXPECT_EQ(box.front(), 2);
+  EXPECT_FALSE(box.take());
+  EXPECT_EQ(box.front(), 2);  // stays the consumer's
+  box.back() = 3;
+  box.publish();
+  ASSERT_TRUE(box.take());
+  EXPECT_EQ(box.front(), 3);
+  CommandSlot slot(emptyCommand(2));
+  putCommand(slot, 1.5, {0.25, -5.0});
+  ASSERT_TRUE(slot.take());
+  EXPECT_EQ(slot.front().stamp, 1.5);
+  EXPECT_EQ(slot.front().volts, (std::vector<double>{0.25, -5.0}));
 }
 
 TEST(Pool, KeepsLastPlanThroughBadReferencesUntilTimeout) {
@@ -118,9 +250,11 @@ TEST(Pool, KeepsLastPlanThroughBadReferencesUntilTimeout) {
   feedState(pool, 0.0, kAtm);
   ASSERT_TRUE(constantReference(pool, 0.0, 8.0, 4.0).ok());
   double t = 0;
+  int rejected = 0;
   for (; t < 0.15; t += 0.005) {
     feedState(pool, t, 150e3);
-    pool.setReference(t, t, 0.01, 1, {"A_FFJ2_flex", "A_FFJ2_ext"}, {kNaN, 1.0});  // rejected every tick
+    const Verdict v = pool.setReference(t, t, 0.01, 1, {"A_FFJ2_flex", "A_FFJ2_ext"}, {kNaN, 1.0});  // rejected every tick
+    rejected += v.reason == RejectReason::kNonFinite;
     const auto& u = pool.update(t);
     for (double x : u) {
       ASSERT_TRUE(std::isfinite(x));
@@ -130,7 +264,7 @@ TEST(Pool, KeepsLastPlanThroughBadReferencesUntilTimeout) {
     }
   }
   EXPECT_EQ(pool.exhausting(), 0u);
-  EXPECT_GE(pool.counters().references_rejected[static_cast<int>(RejectReason::kNonFinite)], 30u);
+  EXPECT_GE(rejected, 30);
   for (; t < 0.3; t += 0.005) {
     feedState(pool, t, 150e3);
     pool.update(t);
@@ -158,7 +292,7 @@ TEST(Pool, ExtremeStateNeverGivesNonFiniteCommand) {
     CylinderPool pool = makePool(controller);
     ASSERT_TRUE(constantReference(pool, 0.0, 5.0, 5.0).ok());
     for (double p : {1e300, -1e300, 0.0, 1e-300}) {
-      ASSERT_TRUE(pool.setState(0.0, {"A_FFJ2_flex", "A_FFJ2_ext"}, {p, p}, {1e300, 0}, {-1e300, 0}, 1e300).ok());
+      ASSERT_TRUE(pool.setState(0.0, 0.0, {"A_FFJ2_flex", "A_FFJ2_ext"}, {p, p}, {1e300, 0}, {-1e300, 0}, 1e300).ok());
       for (double x : pool.update(0.005)) {
         EXPECT_TRUE(std::isfinite(x)) << controller << " p " << p;
         EXPECT_LE(std::abs(x), 5.0) << controller << " p " << p;
@@ -185,7 +319,7 @@ TEST(Pool, TracksForceReferenceInClosedLoop) {
     double t = 0;
     for (int k = 0; k < 400; ++k, t += dt) {
       const double p_meas = std::string(controller) == "ilqg" ? p : plant.pressure()[0];
-      ASSERT_TRUE(pool.setState(t, {"A_FFJ2_flex"}, {p_meas}, {travel}, {0.0}, 620e3).ok());
+      ASSERT_TRUE(pool.setState(t, t, {"A_FFJ2_flex"}, {p_meas}, {travel}, {0.0}, 620e3).ok());
       const double u = pool.update(t)[0];
       ParametricInputs in;
       in.volume = spec.dead_volume + spec.bore_area * travel;
@@ -204,11 +338,18 @@ TEST(Pool, NegativeForceMeansAtmosphere) {
   PoolOptions o;
   o.controller = "pidf";
   CylinderPool pool({m9("A_FFJ2_flex")}, kModel, o);
-  ASSERT_TRUE(pool.setReference(0, 0, 0.005, 1, {"A_FFJ2_flex"}, {-50.0}).ok());
-  ASSERT_TRUE(pool.setState(0, {"A_FFJ2_flex"}, {kAtm}, {0.01}, {0.0}, 620e3).ok());
+  const Verdict v = pool.setReference(0, 0, 0.005, 1, {"A_FFJ2_flex"}, {-50.0});
+  ASSERT_TRUE(v.ok());
+  EXPECT_TRUE(v.clamped_negative);  // reported: the node counts it (references_clamped_negative)
+  ASSERT_TRUE(pool.setState(0, 0, {"A_FFJ2_flex"}, {kAtm}, {0.01}, {0.0}, 620e3).ok());
   pool.update(0.0);
   // Tracking error is measured against the clamped reference: at atmosphere it is zero.
   EXPECT_NEAR(pool.takeWindow().pressure_rmse, 0.0, 1e-9);
+  // Zero is not negative, and another pool's negative force is that pool's to report.
+  EXPECT_FALSE(pool.setReference(0, 0, 0.005, 1, {"A_FFJ2_flex"}, {0.0}).clamped_negative);
+  const Verdict other = pool.setReference(0, 0, 0.005, 1, {"A_FFJ2_flex", "A_MFJ2_flex"}, {1.0, -3.0});
+  ASSERT_TRUE(other.ok());
+  EXPECT_FALSE(other.clamped_negative);
 }
 
 TEST(PoolSplit, DefaultSplitOfTheArmHandModel) {

@@ -74,6 +74,7 @@ TEST(Ilqg, LinearQuadraticCaseEqualsLqr) {
 TEST(Ilqg, RespectsCommandLimits) {
   IlqgParams prm;
   prm.horizon = 20;
+  prm.alpha_p = 1.0;  // the weights are in the dynamics' units, here unitless
   const Linear f(0.9, 0.1);
   std::vector<double> ref(prm.horizon + 1, 10.0), zero(prm.horizon + 1, 0.0);
   IlqgSolver solver(prm);
@@ -128,7 +129,7 @@ TEST(IlqgController, TracksAConstantReference) {
 TEST(PidfController, IntegralRemovesSteadyError) {
   PidfParams prm;
   prm.feedforward = false;
-  prm.kp = 2.0, prm.ki = 20.0, prm.kd = 0.0;
+  prm.kp = 2e-6, prm.ki = 2e-5, prm.kd = 0.0;  // 2 V/MPa, 20 V/(MPa s)
   PidfController c(model(), prm);
   double err;
   simulate(c, 350e3, 2.0, &err);
@@ -250,7 +251,7 @@ TEST(IlqgController, ReferenceJumpStartsAtTheLimit) {
     return std::sqrt(sq / 20);
   };
   double first_with = 0, first_without = 0;
-  const double with = run(0.02, &first_with), without = run(0.0, &first_without);
+  const double with = run(20e3, &first_with), without = run(0.0, &first_without);  // Pa
   EXPECT_DOUBLE_EQ(first_with, IlqgParams{}.u_max);
   EXPECT_LE(with, without * 1.001) << "with " << with << " without " << without;
 }

@@ -3,22 +3,37 @@
 // ROS-free; the pool node and nodelet are thin wrappers around CylinderPool.
 //
 // Fail-safe rules (DESIGN.md section 4):
-//  * a reference with a bad shape, a non-finite value, or an unknown or repeated cylinder
-//    name is rejected whole and counted by reason; the plan in force stays;
-//  * a cylinder whose plan is older than reference_timeout, or whose state is older than
-//    state_timeout, commands exhaust_volts (exhaust port fully open);
+//  * a reference with a bad shape, a non-finite value, an unknown or repeated cylinder name,
+//    or a stamp far from the pool's clock (starting in the future, or already over) is
+//    rejected whole and its reason returned; the plan in force stays;
+//  * negative forces are clamped to zero tension (tendons only pull) and reported;
+//  * an actuator state with a bad shape, a non-finite entry of ours, a repeated name, a name
+//    order other than the one the valve indices were resolved from, or a stamp that is
+//    missing, in the future or already stale is rejected whole; entries with names the
+//    model does not know are skipped and reported;
+//  * a cylinder whose plan is older than reference_timeout, or whose state (by its header
+//    stamp) is older than state_timeout, commands exhaust_volts (exhaust port fully open);
 //  * a controller result that is not finite is replaced by exhaust_volts and counted.
+//
+// Threads: setReference/setState (one input thread, e.g. the ROS callback queue), update
+// (one tick thread) and the monitoring calls (counters, exhausting, takeWindow,
+// recordPolicyLag; any thread) may run concurrently. Inputs reach the tick through
+// lock-free hand-overs (handover.h), and update() allocates nothing and never waits once
+// every buffer has been used once (test_pool_realtime checks it).
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <unordered_map>
 #include <vector>
 
 #include "adroit_core/timing_stats.h"
 #include "adroit_description/cylinders.h"
+#include "adroit_pneumatics/handover.h"
 #include "adroit_pneumatics/pressure_control.h"
 
 namespace adroit::pneumatics {
@@ -37,34 +52,68 @@ struct PoolOptions {
   int solve_every = 1;              // iLQG: ticks between solves (policy evaluated every tick)
   PidfParams pidf;
   double reference_timeout = 0.25;  // s since the last valid reference; then exhaust
-  double state_timeout = 0.05;      // s since the last valid actuator state; then exhaust
+  double state_timeout = 0.05;      // s since the stamp of the last valid actuator state; then exhaust
+  // s: how far a stamp may be from the pool's clock. A reference starting later than
+  // now + stamp_tolerance, or ending before now - stamp_tolerance, is rejected; so is a
+  // state stamped later than now + stamp_tolerance. Larger than the transport latency and
+  // the clock skew between nodes, far smaller than the offset between wall and sim time.
+  double stamp_tolerance = 0.1;
   double exhaust_volts = -5.0;      // fail-safe command
   double atmosphere = constants::kAtmosphere;  // Pa, for force -> pressure
   // Throws std::invalid_argument naming the first bad field.
   void validate() const;
 };
 
-enum class RejectReason { kNone = 0, kTiming, kLength, kNonFinite, kUnknownName, kDuplicateName, kCount };
-const char* rejectReasonName(RejectReason reason);  // "timing", "length", ...
+// Why a force reference was rejected.
+enum class RejectReason {
+  kNone = 0,
+  kTiming,          // stamp not finite, or dt <= 0 with more than one step
+  kStampFuture,     // starts later than now + stamp_tolerance (e.g. a wall-clock stamp under sim time)
+  kStampPast,       // ended before now - stamp_tolerance: nothing of it is left to track
+  kLength,
+  kNonFinite,
+  kUnknownName,
+  kDuplicateName,
+  kCount
+};
+// Why an actuator state was rejected.
+enum class StateReject {
+  kNone = 0,
+  kNoStamp,         // stamp missing (zero) or not finite: its freshness is unknown
+  kStampFuture,     // stamped later than now + stamp_tolerance
+  kStale,           // stamped more than state_timeout ago: already too old to use
+  kLength,
+  kNonFinite,
+  kDuplicateName,
+  kNameOrder,       // our cylinders are not where they were when the valve indices were resolved
+  kCount
+};
+const char* rejectReasonName(RejectReason reason);  // "timing", "stamp_future", ...
+const char* rejectReasonName(StateReject reason);   // "no_stamp", "stale", ...
 
-// Result of handing the pool a message: reason kNone = accepted; detail is one line.
+// Result of handing the pool a force reference: reason kNone = accepted; detail is one line.
 struct Verdict {
   RejectReason reason = RejectReason::kNone;
   std::string detail;
+  bool ignored = false;           // valid, but names none of this pool's cylinders
+  bool clamped_negative = false;  // accepted with negative forces of ours clamped to 0 N
   bool ok() const { return reason == RejectReason::kNone; }
 };
 
+// Result of handing the pool an actuator state.
+struct StateVerdict {
+  StateReject reason = StateReject::kNone;
+  std::string detail;
+  bool unknown_names = false;  // names the model does not have were skipped (accepted or not)
+  bool ok() const { return reason == StateReject::kNone; }
+};
+
+// What only the tick sees (the input verdicts are counted by the caller).
 struct PoolCounters {
   std::uint64_t ticks = 0;
-  std::uint64_t references_accepted = 0;
-  std::uint64_t references_ignored = 0;  // valid, but named none of this pool's cylinders
-  std::array<std::uint64_t, static_cast<int>(RejectReason::kCount)> references_rejected{};
-  std::uint64_t states_accepted = 0;
-  std::uint64_t states_rejected = 0;
   std::uint64_t nonfinite_commands = 0;  // controller output not finite -> exhaust
   std::uint64_t solver_rejections = 0;   // solver result dropped by the controller itself
   std::uint64_t reference_timeouts = 0;  // cylinder plans that expired
-  std::uint64_t rejectedTotal() const;
 };
 
 // Statistics over a reporting window (since the last takeWindow()).
@@ -75,6 +124,17 @@ struct PoolWindow {
   double pressure_rmse = 0;  // Pa
   std::size_t tracking_samples = 0;
 };
+
+// The tick's commands on their way to the publisher thread.
+struct PoolCommand {
+  double stamp = 0;           // s, the pool's clock at the tick
+  std::vector<double> volts;  // names() order
+};
+using CommandSlot = LatestValue<PoolCommand>;
+// A slot for a pool of n cylinders (every buffer sized once, here).
+inline PoolCommand emptyCommand(std::size_t n) { return {0.0, std::vector<double>(n, 0.0)}; }
+// Tick side: copies into the slot's back buffer (same size: no allocation) and publishes it.
+void putCommand(CommandSlot& slot, double stamp, const std::vector<double>& volts);
 
 class CylinderPool {
  public:
@@ -87,52 +147,95 @@ class CylinderPool {
   const std::vector<std::string>& names() const { return names_; }
   const PoolOptions& options() const { return options_; }
 
+  // --- input thread ---------------------------------------------------------------------
   // Force reference (N): sample k of column j, force[k * names.size() + j], applies at
-  // t0 + k dt. Accepted references replace the plans of the pool's cylinders they name.
+  // t0 + k dt (t0 = the message's stamp, now = the pool's clock). Accepted references
+  // replace the plans of the pool's cylinders they name.
   Verdict setReference(double now, double t0, double dt, std::size_t steps, const std::vector<std::string>& names,
                        const std::vector<double>& force);
 
-  // Actuator state. names empty = known_names order. length / length_rate may be empty
-  // (travel and rate 0). Entries of other cylinders are not looked at.
-  Verdict setState(double now, const std::vector<std::string>& names, const std::vector<double>& pressure,
-                   const std::vector<double>& length, const std::vector<double>& length_rate, double supply);
+  // Actuator state stamped `stamp` (its freshness is judged by the stamp, not by when it
+  // arrived). names empty = known_names order. length / length_rate may be empty (travel
+  // and rate 0). Entries of other cylinders are not looked at beyond their names. The
+  // first accepted state that has all of the pool's cylinders fixes valveIndices().
+  StateVerdict setState(double now, double stamp, const std::vector<std::string>& names,
+                        const std::vector<double>& pressure, const std::vector<double>& length,
+                        const std::vector<double>& length_rate, double supply);
 
+  // --- tick thread ----------------------------------------------------------------------
   // One control tick at time now. Commands (V) in names() order, always finite, in [-5, 5].
   const std::vector<double>& update(double now);
 
+  // --- any thread -----------------------------------------------------------------------
+  // Position of each of the pool's cylinders (names() order) in the actuator-state order,
+  // for valve commands by index; valid once valveIndicesResolved() (then it never changes:
+  // a state with another order is rejected, kNameOrder).
+  bool valveIndicesResolved() const { return indices_resolved_.load(std::memory_order_acquire); }
+  const std::vector<int>& valveIndices() const { return valve_index_; }
   // Cylinders commanding exhaust in the last tick (no plan, stale state, or bad result).
-  std::size_t exhausting() const { return exhausting_; }
-  void recordPolicyLag(double seconds) { lag_.add(seconds); }
+  std::size_t exhausting() const { return exhausting_.load(std::memory_order_relaxed); }
+  PoolCounters counters() const;
+  void recordPolicyLag(double seconds);
   PoolWindow takeWindow();
-  const PoolCounters& counters() const { return counters_; }
 
  private:
   struct Plan {
     bool valid = false;
+    std::uint64_t serial = 0;  // which accepted reference made it
     double t0 = 0, dt = 0, received = 0;
     std::vector<double> pressure;  // Pa absolute
   };
   struct State {
     bool valid = false;
-    double received = 0, pressure = 0;
+    double stamp = 0, pressure = 0;
     ParametricInputs inputs;
   };
-  Verdict reject(RejectReason reason, std::string detail);
+  // Tick-side statistics not yet merged into the window (the merge only try-locks).
+  struct Pending {
+    static constexpr std::size_t kCapacity = 64;
+    std::array<double, kCapacity> solve{};
+    std::size_t solve_n = 0;
+    double force_sq = 0, pressure_sq = 0;
+    std::size_t tracking_n = 0;
+  };
+  Verdict reject(RejectReason reason, std::string detail) const { return {reason, std::move(detail)}; }
+  void mergeStatistics();
 
   std::vector<PoolCylinder> cylinders_;
   std::vector<std::string> names_, known_names_;
-  std::unordered_map<std::string, int> slot_;  // known name -> pool slot, -1 = not ours
+  std::unordered_map<std::string, std::size_t> known_index_;  // name -> position in known_names_
+  std::vector<int> slot_of_known_;                            // known position -> pool slot, -1 = not ours
   PoolOptions options_;
+
+  // Input thread: the complete current plans and states (a message may name only some
+  // cylinders), copied whole into the hand-over's back buffer on every accepted message.
+  std::vector<Plan> input_plans_;
+  std::vector<State> input_states_;
+  std::uint64_t next_serial_ = 1;
+  std::vector<std::uint32_t> seen_;  // duplicate-name check: seen_[known] == seen_mark_
+  std::uint32_t seen_mark_ = 0;
+  std::vector<std::pair<int, std::size_t>> ours_;  // (slot, column) of the message being read
+  std::vector<int> valve_index_;
+  std::atomic<bool> indices_resolved_{false};
+  LatestValue<std::vector<Plan>> plan_box_;
+  LatestValue<std::vector<State>> state_box_;
+
+  // Tick thread.
   std::vector<std::unique_ptr<PressureController>> controllers_;
-  std::vector<Plan> plans_;
-  std::vector<State> states_;
+  std::vector<std::uint64_t> expired_serial_;  // plan serial that timed out, per slot
   std::vector<char> active_;
   std::vector<double> commands_, ref_buffer_;
-  std::size_t exhausting_ = 0;
-  PoolCounters counters_;
-  SampleStats solve_, lag_;
-  double force_sq_ = 0, pressure_sq_ = 0;
-  std::size_t tracking_n_ = 0;
+  Pending pending_;
+  std::atomic<std::size_t> exhausting_{0};
+  std::atomic<std::uint64_t> ticks_{0}, nonfinite_commands_{0}, solver_rejections_{0}, reference_timeouts_{0};
+
+  // Window statistics: the tick merges into them with try_lock (never waits), takeWindow locks.
+  std::mutex window_mutex_;
+  std::vector<double> window_solve_;  // capacity fixed at construction; full = samples dropped
+  double window_force_sq_ = 0, window_pressure_sq_ = 0;
+  std::size_t window_tracking_n_ = 0;
+  std::mutex lag_mutex_;  // recordPolicyLag (the publisher thread) vs takeWindow
+  SampleStats lag_;
 };
 
 // Default split of the model's cylinders into pools: the hand cylinders (all but A_ARJ*)

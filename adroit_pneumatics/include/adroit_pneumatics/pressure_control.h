@@ -1,6 +1,9 @@
 // Pressure controllers for one cylinder: iLQG MPC on the parametric model (thesis 5.5)
 // and the PIDF baseline, behind one interface so a pool can run either.
-// Units: the interface is SI (Pa, V, s); the optimiser works in MPa (thesis 5.6.1).
+// Units: SI throughout (Pa, V, s), parameters included. The thesis (5.6.1) states its
+// weights per MPa^2; alpha_p = 1e-12 / Pa^2 is its 1 / MPa^2. The solver's thresholds act on
+// quantities that do not depend on the pressure unit (cost, expected cost change, the
+// Hessian in u), so working in Pa instead of MPa changes nothing but the numbers' exponents.
 #pragma once
 
 #include <memory>
@@ -26,7 +29,10 @@ class ScalarDynamics {
 struct IlqgParams {
   int horizon = 100;            // N
   double dt = 0.005;            // s
-  double alpha_p = 1.0;         // cost weights of eq. 5.12 (squared), pressure in MPa
+  // Cost weights of eq. 5.12 (squared norms), in the dynamics' units: for the pressure
+  // controller alpha_p is per Pa^2 (1e-12 = the thesis' 1 per MPa^2), alpha_u and alpha_w
+  // per V^2.
+  double alpha_p = 1e-12;
   double alpha_u = 1e-4;
   double alpha_w = 1e-4;
   double u_min = -2.0;          // V, about 40 % of the valve range (5.6.3 item 4)
@@ -35,11 +41,11 @@ struct IlqgParams {
                                 // time-shifted warm start (real-time iteration; the thesis
                                 // takes "a few" per estimate update, 5.5.4)
   double feedback_fraction = 0.2;  // partial feedback (5.6.3 item 5)
-  // When the pressure is this far (MPa) from the reference at the start of a solve (a jump
+  // When the pressure is this far (Pa; dynamics units) from the reference at the start of a solve (a jump
   // of the reference), the solver also tries the time-optimal guess "command limit until the
   // predicted pressure reaches the reference, then the command that holds it" and starts
   // from whichever of it and the warm start costs less. 0 disables.
-  double jump_threshold = 0.0;  // off by default (see config/pools.yaml)
+  double jump_threshold = 0.0;  // Pa; off by default (see config/pools.yaml)
   int jump_iterations = 3;      // iterations of a solve that starts far from the reference
   // Offset-free MPC (IlqgPressureController): gain of the disturbance estimate, a constant
   // pressure-rate bias d (Pa/s) added to the model, updated each tick from the one-step
@@ -64,20 +70,25 @@ struct IlqgParams {
 struct Policy {
   bool valid = false;
   double t0 = 0, dt = 0;
-  std::vector<double> p, w, u, kp, kw;  // p in MPa
+  std::vector<double> p, w, u, kp, kw;  // p in Pa, kp in V/Pa
 };
 
 // Box-constrained iLQG on x = [p, w], u (valve memory w = previous command, eq. 5.11).
-// Works on any ScalarDynamics; p and references in the dynamics' units.
+// Works on any ScalarDynamics; p and references in the dynamics' units. Every buffer is
+// allocated at construction: solve() allocates nothing (the pool's 200 Hz tick runs it).
 class IlqgSolver {
  public:
   explicit IlqgSolver(const IlqgParams& params);
   const IlqgParams& params() const { return params_; }
 
-  // p_ref, u_des: horizon + 1 samples. u_init: horizon samples (warm start) or empty.
-  // Returns false (and leaves the last solution untouched) if the result is not finite.
+  // p_ref, u_des: horizon + 1 samples. u_init: n_init (<= horizon) warm-start samples,
+  // u_des beyond them. Returns false if the result is not finite.
   bool solve(const ScalarDynamics& f, double p0, double w0, const double* p_ref, const double* u_des,
-             const std::vector<double>& u_init, int iterations);
+             const double* u_init, int n_init, int iterations);
+  bool solve(const ScalarDynamics& f, double p0, double w0, const double* p_ref, const double* u_des,
+             const std::vector<double>& u_init, int iterations) {
+    return solve(f, p0, w0, p_ref, u_des, u_init.data(), static_cast<int>(u_init.size()), iterations);
+  }
 
   const std::vector<double>& u() const { return u_; }
   const std::vector<double>& p() const { return p_; }
@@ -93,11 +104,11 @@ class IlqgSolver {
                  std::vector<double>& u) const;
   bool backward(const double* p_ref, const double* u_des, double reg, double* expected);
   // The "limit, then hold" initial guess for a reference far from p0 (see jump_threshold).
-  void bangHoldGuess(const ScalarDynamics& f, double p0, double w0, const double* p_ref, std::vector<double>& u) const;
+  void bangHoldGuess(const ScalarDynamics& f, double p0, double w0, const double* p_ref, std::vector<double>& u);
 
   IlqgParams params_;
   std::vector<double> p_, w_, u_, a_, b_, c_, kff_, kp_, kw_;
-  std::vector<double> p_try_, w_try_, u_try_;
+  std::vector<double> p_try_, w_try_, u_try_, p_alt_, w_alt_, u_alt_, u_start_, knots_;  // workspaces
   double cost_ = 0;
 };
 
@@ -141,7 +152,7 @@ class IlqgPressureController : public PressureController {
   int solve_every_;
   int tick_ = 0;
   Policy policy_;
-  std::vector<double> p_ref_mpa_, u_des_, warm_;
+  std::vector<double> p_ref_, u_des_, warm_;  // sized at construction
   // Offset-free estimator memory: last tick's time, measurement, commands and inputs.
   bool have_last_ = false;
   double last_t_ = 0, last_p_ = 0, last_w_ = 0, last_u_ = 0, disturbance_ = 0, p_est_ = 0;
@@ -149,9 +160,9 @@ class IlqgPressureController : public PressureController {
 };
 
 struct PidfParams {
-  double kp = 3.0;           // V/MPa
-  double ki = 30.0;          // V/(MPa s)
-  double kd = 0.02;          // V s/MPa
+  double kp = 3e-6;          // V/Pa   (3 V/MPa)
+  double ki = 3e-5;          // V/(Pa s)
+  double kd = 2e-8;          // V s/Pa
   double filter_hz = 30.0;   // derivative low-pass
   bool feedforward = true;   // add the model's steady-state command for the reference
   double u_min = -2.0, u_max = 2.0;

@@ -36,7 +36,7 @@
 
 #include "adroit_core/timing_stats.h"
 #include "adroit_description/scenes.h"
-#include "adroit_driver/sim_driver.h"
+#include "sim_driver.h"
 
 using adroit::Stopwatch;
 using namespace adroit::driver;
@@ -387,6 +387,7 @@ int main(int argc, char** argv) {
   double rtf = 0;
   {
     SimDriver driver(ros::NodeHandle(), ros::NodeHandle("/bench_realtime"));
+    driver.collectJointIntervals(true);
     driver.start();
     std::this_thread::sleep_for(std::chrono::seconds(1));
     driver.takeJointIntervals();

@@ -1,15 +1,30 @@
-// ROS wrapper of SimulatedRobot, shared by the adroit_sim node and the SimNodelet:
-// parameters -> core, topics/services/timers -> core, and the simulation thread that steps
-// the core (paced at real time, or lockstep) and publishes the sensors at their rates.
+// ROS wrapper of SimulatedRobot, shared by the adroit_sim node and the SimNodelet. One file
+// per job:
+//   sim_params.cpp       ~parameters -> DriverParams (one-line errors naming the parameter)
+//   sim_driver.cpp       set-up: topics, services, the two callback queues, start/stop
+//   sim_loop.cpp         the simulation thread: pacing (real time / lockstep), scheduling
+//   sim_publication.cpp  the publication ring and the publisher thread (messages, /clock, tf)
+//   sim_services.cpp     commands, e-stop, pause, step, reset, set object pose
+//   sim_diagnostics.cpp  diagnostics, and each safety event logged once
+//   sim_markers.cpp      rviz markers built from a snapshot, off the simulation thread
+//
+// Threads. The simulation thread steps the robot and hands each step's outputs to the
+// publisher thread through a preallocated ring: after start-up it allocates nothing,
+// serialises nothing and logs nothing (test_sim_allocations proves it). The safety path
+// (e-stop service and input, release, pause, valve and force commands, the safety monitor)
+// has its own callback queue and spinner thread, so a long /step or /reset on the default
+// queue never delays it.
 #pragma once
 
+#include <ros/callback_queue.h>
 #include <ros/ros.h>
 
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
+#include <functional>
 #include <memory>
 #include <mutex>
-#include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
@@ -22,7 +37,6 @@
 #include <adroit_msgs/Touch.h>
 #include <adroit_msgs/ValveCommand.h>
 #include <nav_msgs/Odometry.h>
-#include <rosgraph_msgs/Clock.h>
 #include <sensor_msgs/JointState.h>
 #include <std_msgs/Bool.h>
 #include <std_srvs/SetBool.h>
@@ -30,16 +44,19 @@
 #include <tf2_ros/transform_broadcaster.h>
 #include <visualization_msgs/MarkerArray.h>
 
+#include "adroit_core/mujoco_model.h"
 #include "adroit_core/timing_stats.h"
 #include "adroit_driver/simulated_robot.h"
+#include "adroit_ros/params.h"
 
 namespace adroit::driver {
 
-// A parameter is missing, malformed or out of range; what() is the one line to print.
-class ParameterError : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
+using ParameterError = rosutil::ParameterError;
+
+// Monotonic wall time in seconds (pacing, rates, grace periods).
+inline double wallSeconds() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
 
 // Everything the driver reads from its private parameters (see config/sim.yaml).
 struct DriverParams {
@@ -48,12 +65,14 @@ struct DriverParams {
   bool use_sim_time = false;
   bool start_paused = false;
   double joint_state_rate = 500, actuator_state_rate = 250, touch_rate = 250, object_rate = 250;
-  double marker_rate = 20;         // wall Hz, only while someone listens
+  double marker_rate = 20;          // wall Hz, only while someone listens
   double diagnostics_period = 1.0;  // wall s
-  double max_lag = 0.1;            // s behind schedule before real time re-synchronises
-  // Real time only: SCHED_FIFO priority of the simulation thread (which steps and publishes),
-  // 0 = normal scheduling. Falls back to normal scheduling, with a warning, when the system
-  // does not permit it.
+  double max_lag = 0.1;             // s behind schedule before real time re-synchronises
+  // Diagnostics warn about cylinders never commanded once this long (wall s) has passed
+  // since start or release: a pool that never started leaves its cylinders unwatched.
+  double never_commanded_grace = 10.0;
+  // Real time only: SCHED_FIFO priority of the simulation thread, 0 = normal scheduling.
+  // Falls back to normal scheduling, with a warning, when the system does not permit it.
   int realtime_priority = 20;
   // Lockstep only: nice value of the simulation thread, in [-20, 0], 0 = unchanged. The
   // thread never sleeps there, so SCHED_FIFO would be throttled (50 ms stalls every second);
@@ -64,76 +83,94 @@ struct DriverParams {
 // Reads and validates ~parameters. Throws ParameterError (unknown scene, bad value...).
 DriverParams readParams(const ros::NodeHandle& pnh);
 
+// Publication every `steps` physics steps; the rate must divide the step rate so that the
+// published stream is regular (no 2-3-2-3 step beat). Throws ParameterError.
+int stepsPerPublication(const std::string& name, double rate, double timestep);
+
+// The most steps one /adroit/step request may ask for (1000 simulated seconds at 2 ms):
+// larger requests are refused, and any request is cancelled by pause or e-stop.
+constexpr std::uint32_t kMaxStepsPerRequest = 500000;
+
 class SimDriver {
  public:
   // Throws ParameterError or ModelLoadError with one line to report.
   SimDriver(ros::NodeHandle nh, ros::NodeHandle pnh);
   ~SimDriver();
 
-  void start();  // starts the simulation thread
+  void start();  // starts the simulation, publisher and safety threads
   void stop();
 
-  // For benchmarks: publication intervals of joint_states (wall s) since the last call,
-  // and the steps simulated so far.
+  // For benchmarks: publication intervals of joint_states (wall s) since the last call
+  // (recorded only after collectJointIntervals(true)), and the steps simulated so far.
+  void collectJointIntervals(bool on) { collect_joint_intervals_ = on; }
   std::vector<double> takeJointIntervals();
-  std::uint64_t steps();
-  // Kernel thread id of the simulation thread (0 before start), for scheduling statistics.
+  std::uint64_t steps() const { return steps_done_.load(std::memory_order_relaxed); }
+  // Kernel thread id of the simulation thread (0 before start), for scheduling statistics
+  // and the allocation test.
   long simulationThreadId() const { return sim_thread_id_; }
 
  private:
-  // What is due after one step. Lockstep: handed from the simulation thread to the
-  // publisher thread, since building, serialising and sending the messages costs about as
-  // much as a physics step, so it runs on the other core. Real time: the simulation thread
-  // publishes it itself at the state's deadline; a hand-over would put a second thread
-  // wake-up (tens of microseconds, millisecond tails on a VM) into every 2 ms period. Slots
-  // live in a ring and are reused, so handing a step over copies a few hundred numbers and
-  // allocates nothing.
+  // What is due after one step, handed from the simulation thread to the publisher thread
+  // (building, serialising and sending the messages costs about as much as a physics step,
+  // and must never delay the simulation). Slots live in a ring and are reused: handing a
+  // step over copies a few hundred numbers and allocates nothing.
   struct Batch {
     bool all = false;  // an explicit republish (after reset / set pose), not a step
     bool clock = false, joints = false, actuators = false, touch = false, object = false;
+    bool markers = false;  // build markers from the snapshot (sim_markers.cpp)
     double sim_clock = 0;
     ros::Time stamp;
     Signals signals;
     std::vector<double> command;
-    visualization_msgs::MarkerArray::Ptr markers;
   };
 
+  // Sim thread.
   void loop();
-  void publishLoop();  // the publisher thread (lockstep only)
-  // Publishes every queued batch in order. Called by one thread only: the publisher thread
-  // in lockstep, the simulation thread in real time.
-  void publishQueued();
-  // Queues what is due after a step (all: an explicit republish) and, in real time,
-  // publishes it. Lockstep: flush wakes a polling publisher now rather than at its next look.
-  void publishDue(bool all, double wall_now, bool flush);
-  void flushPublication();  // lockstep: wakes the publisher for whatever is queued
-  // Real time: the simulation thread under SCHED_FIFO (~realtime_priority); false and one
-  // warning when not permitted.
   bool enterRealtimeScheduling();
   void leaveRealtimeScheduling(const char* why);
-  // Lockstep: the simulation thread at ~lockstep_nice; one warning when not permitted.
   void raiseLockstepWeight();
+  void recordStepTiming(double step_seconds, double lateness);
+  void runPendingRequest();  // a reset / set pose handed over by a service
+
+  // Publication (sim_publication.cpp).
+  // Queues what is due after a step (all: an explicit republish). Lockstep: flush wakes a
+  // polling publisher now rather than at its next look.
+  void publishDue(bool all, double wall_now, bool flush);
+  void flushPublication();
+  void publishLoop();
+  void publishQueued();
   void publishClock(double sim_clock);
   void publishBatch(const Batch& batch);
-  // After reset / set object pose: publish the new state now and wait until it is sent.
-  void republishAndWait();
+  void fillMessages(const Batch& batch);
   std::uint64_t queuedBatches();
   void waitForPublication(std::uint64_t batches);  // until that many batches are sent
-  void fillMessages(const Batch& batch);  // publisher thread
-  void fillMarkers();
   ros::Time stamp() const;
 
+  // Markers (sim_markers.cpp): the simulation thread copies mjData and the true signals
+  // into a preallocated snapshot at the marker rate; the publisher thread builds from it.
+  void takeMarkerSnapshot();
+  void publishMarkers();
+
+  // Safety queue (sim_services.cpp).
   void onValveCommand(const adroit_msgs::ValveCommand::ConstPtr& msg);
   void onForceCommand(const adroit_msgs::TendonForceCommand::ConstPtr& msg);
   void onEstopInput(const std_msgs::Bool::ConstPtr& msg);
-  bool onReset(adroit_msgs::Reset::Request& req, adroit_msgs::Reset::Response& res);
-  bool onSetObjectPose(adroit_msgs::SetObjectPose::Request& req, adroit_msgs::SetObjectPose::Response& res);
   bool onPause(std_srvs::SetBool::Request& req, std_srvs::SetBool::Response& res);
-  bool onStep(adroit_msgs::Step::Request& req, adroit_msgs::Step::Response& res);
   bool onEstop(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool onRelease(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
-  void onDiagnostics(const ros::WallTimerEvent& event);
   void reportCommand(const char* topic, const CommandResult& result);
+  void cancelSteps(const char* why);  // pending /step requests end, unsuccessful
+  // Default queue (sim_services.cpp).
+  bool onReset(adroit_msgs::Reset::Request& req, adroit_msgs::Reset::Response& res);
+  bool onSetObjectPose(adroit_msgs::SetObjectPose::Request& req, adroit_msgs::SetObjectPose::Response& res);
+  bool onStep(adroit_msgs::Step::Request& req, adroit_msgs::Step::Response& res);
+  // Runs `change` on the simulation thread between two steps, then republishes the state
+  // and waits until it is sent. False (and *error) when refused or when the driver stops.
+  bool changeState(const std::function<bool(std::string*)>& change, std::string* error);
+
+  // Diagnostics (sim_diagnostics.cpp).
+  void onDiagnostics(const ros::WallTimerEvent& event);
+  void onSafetyMonitor(const ros::WallTimerEvent& event);  // safety queue, 20 Hz
   void publishSafeStateIfChanged();
 
   DriverParams params_;
@@ -141,22 +178,34 @@ class SimDriver {
   int joint_every_ = 1, actuator_every_ = 1, touch_every_ = 1, object_every_ = 1;
 
   ros::NodeHandle nh_, io_;
+  ros::CallbackQueue safety_queue_;
+  ros::NodeHandle safety_io_;  // /adroit on safety_queue_
+  std::unique_ptr<ros::AsyncSpinner> safety_spinner_;
   ros::Publisher joint_pub_, actuator_pub_, touch_pub_, odom_pub_, diag_pub_, safe_pub_, marker_pub_, clock_pub_;
   ros::Subscriber valve_sub_, force_sub_, estop_input_sub_;
   std::vector<ros::ServiceServer> services_;
-  ros::WallTimer diag_timer_;
+  ros::WallTimer diag_timer_, monitor_timer_;
   std::unique_ptr<tf2_ros::TransformBroadcaster> tf_;
 
-  // robot_ and marker_msg_ are guarded by robot_mutex_; the other messages belong to the
-  // publisher thread.
+  // robot_ is guarded by robot_mutex_. The simulation thread holds it for a step; every
+  // other holder only copies a few numbers (commands are validated before taking it,
+  // resets and teleports run on the simulation thread itself).
   std::mutex robot_mutex_;
+  // Publisher thread's messages.
   sensor_msgs::JointState joint_msg_;
   adroit_msgs::ActuatorStates actuator_msg_;
   adroit_msgs::Touch touch_msg_;
   nav_msgs::Odometry odom_msg_;
-  visualization_msgs::MarkerArray marker_msg_;
+  geometry_msgs::TransformStamped object_tf_;
+  // Safety monitor's state (safety queue only).
   bool last_safe_published_ = false, safe_published_once_ = false;
+  Counters logged_;            // event counters already logged
+  std::atomic<std::uint64_t> estop_input_changes_{0};
+  std::atomic<double> released_wall_{0};  // start or last release, for the never-commanded grace
   std::atomic<bool> warned_ignored_while_safe_{false};  // this safe-state episode
+  std::atomic<bool> markers_wanted_{false};             // someone listens (checked at 20 Hz)
+  std::atomic<std::uint64_t> nonfinite_suppressed_{0};  // states not published (NaN/Inf)
+
   // Wall-time mode: stamp = wall_offset_ + clock, the scheduled time of the state (moves
   // forward only, when the real-time schedule restarts after a pause or an overload).
   double wall_offset_ = 0;
@@ -166,10 +215,16 @@ class SimDriver {
   std::condition_variable control_cv_;
   bool paused_ = false;
   std::uint64_t pending_steps_ = 0;
-  bool publish_now_ = false;
+  std::string step_interruption_;  // why the last pending steps were cancelled
+  std::uint64_t step_cancellations_ = 0;
+  // A state change a service asked for, run by the simulation thread (changeState), and
+  // the batch count that holds its republished state.
+  const std::function<bool(std::string*)>* pending_change_ = nullptr;
+  bool change_running_ = false, change_done_ = false, change_ok_ = false;
+  std::string change_error_;
+  std::uint64_t change_published_ = 0;
+
   std::atomic<bool> running_{false};
-  // Steps simulated so far, readable without the robot lock (a poller must not stall the
-  // simulation thread).
   std::atomic<std::uint64_t> steps_done_{0};
   std::atomic<int> fifo_priority_{0};  // of the simulation thread now (0 = normal scheduling)
   std::atomic<int> thread_nice_{0};    // of the simulation thread now (lockstep)
@@ -181,13 +236,11 @@ class SimDriver {
   // the simulation waits, so no state is dropped and memory stays bounded.
   static constexpr std::size_t kRingSize = 64;
   // Lockstep. Waking a sleeping thread costs the waker a futex wake-up and an IPI: about
-  // 50 us of CPU on the development VM (nested KVM), a quarter of an arm-hand step if done
-  // every step, plus roscpp's threads woken in turn. So: while batches keep coming, the
-  // publisher looks for them by itself every kPollPeriod (a timer on its own core) and the
-  // simulation thread wakes nobody; a publisher that found nothing for a period sleeps
-  // and is woken by the next batch. A polling publisher is woken at once after the last
-  // step of a /step request, before the simulation thread waits, for a republish, and when
-  // the ring is half full. Real time publishes from the simulation thread (see Batch).
+  // 50 us of CPU on the development VM, a quarter of an arm-hand step if done every step.
+  // So while batches keep coming, the publisher looks for them by itself every
+  // kPollPeriod and the simulation thread wakes nobody; a publisher that found nothing for
+  // a period sleeps and is woken by the next batch. Real time wakes it every step (the
+  // simulation thread sleeps until the next deadline anyway).
   static constexpr std::chrono::microseconds kPollPeriod{1000};
   std::mutex publish_mutex_;
   std::condition_variable work_cv_;       // the publisher waits for batches
@@ -199,16 +252,35 @@ class SimDriver {
   std::uint64_t queued_batches_ = 0, published_batches_ = 0;
   std::thread publisher_;
 
-  // Statistics, guarded by stats_mutex_.
+  // Marker snapshot: written by the simulation thread when marker_mutex_ is free (try-lock,
+  // so it never waits), read by the publisher thread.
+  std::mutex marker_mutex_;
+  DataPtr marker_data_;
+  Signals marker_truth_;
+  ros::Time marker_stamp_;
+  bool marker_fresh_ = false;
+  double last_marker_wall_ = -1;
+  visualization_msgs::MarkerArray marker_msg_;
+
+  // Statistics. The simulation thread adds to `timing_` under a try-lock (a sample that
+  // meets a busy lock is dropped, and counted); diagnostics swap it with `timing_spare_`,
+  // whose storage was reserved, so adding never allocates.
+  struct StepTiming {
+    SampleStats step_time;  // compute time of one step (s)
+    SampleStats lateness;   // publication after the deadline (s), real time
+    std::uint64_t deadline_misses = 0, resyncs = 0, dropped = 0;
+  };
+  static constexpr std::size_t kTimingCapacity = 1 << 16;  // samples per diagnostics window
   std::mutex stats_mutex_;
-  SampleStats step_time_;          // compute time of one step (s), this diagnostics window
-  SampleStats lateness_;           // publication after the deadline (s), real-time mode
-  std::vector<double> joint_intervals_;
-  double last_joint_wall_ = -1;
-  std::uint64_t deadline_misses_ = 0, resyncs_ = 0;
+  StepTiming timing_, timing_spare_;
+  std::uint64_t total_misses_ = 0, total_resyncs_ = 0;  // diagnostics thread
   double window_wall_ = -1, window_clock_ = 0;
   std::uint64_t window_steps_ = 0;
-  double last_marker_wall_ = -1;
+  // Benchmark only (publisher thread), off unless asked for.
+  std::atomic<bool> collect_joint_intervals_{false};
+  std::mutex intervals_mutex_;
+  std::vector<double> joint_intervals_;
+  double last_joint_wall_ = -1;
 };
 
 }  // namespace adroit::driver

@@ -2,7 +2,7 @@
 // cylinder for its gauge pressure, touch contacts and the free object.
 #include <cmath>
 
-#include "adroit_driver/sim_driver.h"
+#include "sim_driver.h"
 
 namespace adroit::driver {
 
@@ -33,17 +33,32 @@ void setPose(visualization_msgs::Marker& marker, const double* pos, const double
 }
 }  // namespace
 
-// Called with robot_mutex_ held.
-void SimDriver::fillMarkers() {
+// Simulation thread, robot_mutex_ held: copies what the markers need into the preallocated
+// snapshot (mj_copyData into an existing mjData allocates nothing). try_lock: when the
+// publisher is still building from the last snapshot, this one is skipped.
+void SimDriver::takeMarkerSnapshot() {
+  std::unique_lock<std::mutex> lock(marker_mutex_, std::try_to_lock);
+  if (!lock.owns_lock()) return;
+  mj_copyData(marker_data_.get(), robot_->model(), robot_->data());
+  marker_truth_ = robot_->truth();
+  marker_stamp_ = stamp();
+  marker_fresh_ = true;
+}
+
+// Publisher thread: builds the markers from the snapshot and sends them.
+void SimDriver::publishMarkers() {
+  std::lock_guard<std::mutex> lock(marker_mutex_);
+  if (!marker_fresh_) return;
+  marker_fresh_ = false;
   const mjModel* m = robot_->model();
-  const mjData* d = robot_->data();
-  const Signals& truth = robot_->truth();
+  const mjData* d = marker_data_.get();
+  const Signals& truth = marker_truth_;
   const auto& cylinders = robot_->cylinders();
   const double supply = params_.sim.supply_pressure, atm = robot_->atmosphericPressure();
   marker_msg_.markers.clear();
   visualization_msgs::Marker base;
   base.header.frame_id = "world";
-  base.header.stamp = stamp();
+  base.header.stamp = marker_stamp_;
   base.action = visualization_msgs::Marker::ADD;
   base.pose.orientation.w = 1;
   base.frame_locked = false;
@@ -140,6 +155,7 @@ void SimDriver::fillMarkers() {
       marker_msg_.markers.push_back(shape);
     }
   }
+  marker_pub_.publish(marker_msg_);
 }
 
 }  // namespace adroit::driver

@@ -3,7 +3,7 @@
 
 #include <cstdio>
 
-#include "adroit_driver/sim_driver.h"
+#include "sim_driver.h"
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "adroit_sim");
@@ -16,7 +16,10 @@ int main(int argc, char** argv) {
     return 1;
   }
   driver->start();
-  ros::spin();
+  // Two threads for the default queue, so diagnostics go on during a long /step; the
+  // safety path has its own queue and thread inside the driver.
+  ros::MultiThreadedSpinner spinner(2);
+  spinner.spin();
   driver->stop();
   return 0;
 }

@@ -2,7 +2,7 @@
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 
-#include "adroit_driver/sim_driver.h"
+#include "sim_driver.h"
 
 namespace adroit::driver {
 
@@ -15,7 +15,9 @@ class SimNodelet : public nodelet::Nodelet {
  private:
   void onInit() override {
     try {
-      driver_ = std::make_unique<SimDriver>(getNodeHandle(), getPrivateNodeHandle());
+      // The multi-threaded handles: a long /step must not hold up diagnostics (the safety
+      // path has its own queue and thread inside the driver).
+      driver_ = std::make_unique<SimDriver>(getMTNodeHandle(), getMTPrivateNodeHandle());
     } catch (const std::exception& e) {
       // A nodelet cannot exit its manager: report and stay inert.
       NODELET_FATAL("adroit_sim: %s", e.what());

@@ -19,18 +19,30 @@ const char* verdictName(CommandVerdict v) {
   return "?";
 }
 
-namespace {
-CheckedCommand fail(CommandVerdict v, std::string error) {
-  CheckedCommand c;
-  c.verdict = v;
-  c.error = std::move(error);
-  return c;
-}
-}  // namespace
-
 CheckedCommand checkCommand(const NameIndex& actuators, const std::vector<std::string>& names,
                             const std::vector<std::uint16_t>& indices, const std::vector<double>& values,
                             const ValueLimits& limits) {
+  CheckedCommand out;
+  std::vector<char> seen;
+  checkCommand(actuators, names, indices, values, limits, &out, &seen);
+  return out;
+}
+
+void checkCommand(const NameIndex& actuators, const std::vector<std::string>& names,
+                  const std::vector<std::uint16_t>& indices, const std::vector<double>& values,
+                  const ValueLimits& limits, CheckedCommand* out_ptr, std::vector<char>* seen_ptr) {
+  CheckedCommand& out = *out_ptr;
+  std::vector<char>& seen = *seen_ptr;
+  // clear() keeps the storage: the next command reuses it.
+  out.actuator.clear();
+  out.value.clear();
+  out.error.clear();
+  auto fail = [&out](CommandVerdict v, std::string error) {
+    out.verdict = v;
+    out.error = std::move(error);
+    out.actuator.clear();
+    out.value.clear();
+  };
   if (values.empty() && names.empty() && indices.empty()) return fail(CommandVerdict::kEmpty, "empty command");
   if (!names.empty() && !indices.empty())
     return fail(CommandVerdict::kBadAddressing, "both name[] and index[] are set; use exactly one");
@@ -38,9 +50,7 @@ CheckedCommand checkCommand(const NameIndex& actuators, const std::vector<std::s
   if (addressed != values.size())
     return fail(CommandVerdict::kBadAddressing, "addresses " + std::to_string(addressed) + " actuators but carries " +
                                                     std::to_string(values.size()) + " values");
-  CheckedCommand out;
-  out.actuator.reserve(values.size());
-  std::vector<char> seen(actuators.size(), 0);
+  seen.assign(actuators.size(), 0);
   for (std::size_t k = 0; k < values.size(); ++k) {
     int a;
     if (!names.empty()) {
@@ -58,7 +68,7 @@ CheckedCommand checkCommand(const NameIndex& actuators, const std::vector<std::s
     out.actuator.push_back(a);
   }
   out.verdict = CommandVerdict::kAccepted;
-  out.value = values;
+  out.value.assign(values.begin(), values.end());
   for (std::size_t k = 0; k < values.size(); ++k) {
     const int a = out.actuator[k];
     const double v = values[k];
@@ -73,7 +83,6 @@ CheckedCommand checkCommand(const NameIndex& actuators, const std::vector<std::s
       out.verdict = CommandVerdict::kClamped;
     }
   }
-  return out;
 }
 
 }  // namespace adroit::driver

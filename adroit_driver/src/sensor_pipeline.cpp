@@ -8,40 +8,78 @@ namespace adroit::driver {
 namespace {
 constexpr double kTwoPi = 6.283185307179586;
 constexpr double kTimeEps = 1e-9;
+const std::vector<double> kNoFrame;  // what an empty line reads (never, in use: restart() pushes first)
 
 double quantise(double v, double quantum) { return quantum > 0 ? quantum * std::round(v / quantum) : v; }
 }  // namespace
 
+bool allFinite(const Signals& s) {
+  auto finite = [](const auto& values) {
+    return std::all_of(values.begin(), values.end(), [](double v) { return std::isfinite(v); });
+  };
+  return finite(s.joint_position) && finite(s.joint_velocity) && finite(s.joint_effort) && finite(s.pressure) &&
+         finite(s.length) && finite(s.length_rate) && finite(s.tension) && std::isfinite(s.supply_pressure) &&
+         finite(s.touch) && finite(s.object);
+}
+
+void DelayLine::reserve(std::size_t frames, std::size_t frame_size) {
+  if (frames > slots_.size()) resize(frames);
+  for (Slot& s : slots_) s.values.reserve(frame_size);
+}
+
+void DelayLine::resize(std::size_t capacity) {
+  // Oldest first from index 0; the slots not in use move along with their storage.
+  std::vector<Slot> slots(capacity);
+  for (std::size_t k = 0; k < slots_.size(); ++k) slots[k] = std::move(slot(k));
+  slots_.swap(slots);
+  head_ = 0;
+}
+
 void DelayLine::push(double time, const std::vector<double>& frame) {
-  // Reuses the storage of a frame that has left the line: no allocation per step.
-  std::vector<double> storage;
-  if (!spare_.empty()) {
-    storage = std::move(spare_.back());
-    spare_.pop_back();
-  }
-  storage.assign(frame.begin(), frame.end());
-  frames_.emplace_back(time, std::move(storage));
+  if (size_ == slots_.size()) resize(std::max<std::size_t>(4, 2 * slots_.size()));  // not reserved enough
+  Slot& s = slot(size_);
+  s.time = time;
+  s.values.assign(frame.begin(), frame.end());  // within the slot's capacity once reserved
+  ++size_;
 }
 
 const std::vector<double>& DelayLine::at(double time) {
-  while (frames_.size() >= 2 && frames_[1].first <= time + kTimeEps) {
-    spare_.push_back(std::move(frames_.front().second));
-    frames_.pop_front();
+  if (size_ == 0) return kNoFrame;
+  while (size_ >= 2 && slot(1).time <= time + kTimeEps) {
+    head_ = (head_ + 1) % slots_.size();
+    --size_;
   }
-  return frames_.front().second;
+  return slot(0).values;
 }
 
 SensorPipeline::SensorPipeline(const SensorRealism& params, ActuationMode mode, std::vector<double> bore_area,
-                               double atmospheric_pressure, double min_tension)
+                               double atmospheric_pressure, double min_tension, double timestep)
     : params_(params),
       mode_(mode),
       bore_area_(std::move(bore_area)),
       atmospheric_pressure_(atmospheric_pressure),
       min_tension_(min_tension),
+      timestep_(timestep),
       noise_(params.seed),
       cylinder_model_(bore_area_.size(), params.cylinder, params.seed + 2) {}
 
+void SensorPipeline::reserveLines(const Signals& truth) {
+  if (!(timestep_ > 0)) return;
+  // A line holds the frames of the last `delay` (one per update at most), the newest frame
+  // older than that, and the one pushed before the read: 2 more; 1 more for rounding.
+  auto frames = [this](double delay) {
+    return static_cast<std::size_t>(std::ceil((params_.enabled ? delay : 0.0) / timestep_)) + 3;
+  };
+  const std::size_t nj = truth.joint_position.size(), nc = truth.pressure.size();
+  joints_.reserve(frames(params_.joint_delay), 3 * nj);
+  cylinders_.reserve(frames(params_.cylinder_delay), 4 * nc + 1);
+  touch_.reserve(frames(params_.touch_delay), truth.touch.size());
+  object_.reserve(frames(params_.object_delay), truth.object.size());
+  frame_.reserve(std::max({3 * nj, 4 * nc + 1, truth.touch.size(), truth.object.size()}));
+}
+
 void SensorPipeline::restart(double now, const Signals& truth) {
+  reserveLines(truth);
   joints_.clear();
   cylinders_.clear();
   touch_.clear();

@@ -33,6 +33,12 @@ std::string validate(const SimConfig& c) {
     return describe("~min_tension", "in [0, 5] N", c.min_tension);
   if (!(c.supply_pressure > 150e3 && c.supply_pressure <= 1e6))
     return describe("~supply_pressure", "in (150e3, 1e6] Pa absolute", c.supply_pressure);
+  if (!positiveFinite(c.max_reset_distance))
+    return describe("~max_reset_distance", "> 0 and finite (m)", c.max_reset_distance);
+  if (!positiveFinite(c.max_reset_velocity))
+    return describe("~max_reset_velocity", "> 0 and finite (rad/s or m/s)", c.max_reset_velocity);
+  if (!(c.reset_range_margin >= 0 && c.reset_range_margin <= 1))
+    return describe("~reset_range_margin", "in [0, 1] (fraction of a joint's range)", c.reset_range_margin);
   const SensorRealism& s = c.sensors;
   if (!positiveFinite(s.joint_rate) || s.joint_rate > 10000)
     return describe("~sensors/joint_rate", "in (0, 10000] Hz", s.joint_rate);

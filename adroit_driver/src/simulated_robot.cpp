@@ -3,12 +3,12 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <sstream>
 #include <stdexcept>
 
 namespace adroit::driver {
 
 namespace {
-constexpr double kNever = -std::numeric_limits<double>::infinity();
 constexpr double kExhaustVolts = -5.0;  // safe state: every valve fully open to exhaust
 constexpr double kIdleVolts = 0.0;      // valve centred: the command before any controller
 
@@ -26,6 +26,14 @@ std::string joinNames(const NameIndex& index) {
   std::string out;
   for (const auto& n : index.names()) out += (out.empty() ? "" : ", ") + n;
   return out;
+}
+
+constexpr double kQuaternionTolerance = 1e-6;  // |norm - 1| of a quaternion a reset accepts
+
+std::string format(double v) {
+  std::ostringstream out;
+  out << v;
+  return out.str();
 }
 
 bool allFinite(const std::vector<double>& v) {
@@ -94,14 +102,18 @@ SimulatedRobot::SimulatedRobot(const SimConfig& config) : config_(config) {
     object_dof_ = m->jnt_dofadr[m->body_jntadr[object]];
   }
 
+  checked_.actuator.reserve(n);
+  checked_.value.reserve(n);
+  seen_.reserve(n);
   const double idle = config_.mode == ActuationMode::kPneumatic ? kIdleVolts : config_.min_tension;
   command_.assign(n, idle);
   applied_command_ = command_;
-  last_command_clock_.assign(n, kNever);
+  last_command_clock_.assign(n, kNeverCommanded);
+  never_commanded_ = n;
   travel_.assign(n, 0.0);
   travel_rate_.assign(n, 0.0);
   sensors_ = SensorPipeline(config_.sensors, config_.mode, bore_area, description::kAtmosphericPressure,
-                            config_.min_tension);
+                            config_.min_tension, config_.timestep);
 
   std::string error;
   if (!resetToKeyframe(config_.initial_keyframe, &error)) throw std::invalid_argument("~initial_keyframe: " + error);
@@ -130,37 +142,70 @@ CommandResult SimulatedRobot::acceptCommand(const CheckedCommand& checked) {
   }
   ++counters_.accepted;
   for (std::size_t k = 0; k < checked.actuator.size(); ++k) {
-    command_[checked.actuator[k]] = checked.value[k];
-    last_command_clock_[checked.actuator[k]] = clock_;
+    const int a = checked.actuator[k];
+    if (last_command_clock_[a] == kNeverCommanded) --never_commanded_;
+    command_[a] = checked.value[k];
+    last_command_clock_[a] = clock_;
   }
   safety_.watchdog_armed = true;
   result.applied = true;
   return result;
 }
 
+namespace {
+constexpr const char* kValvesInForceMode = "valve command rejected: driver is in force mode";
+constexpr const char* kForcesInPneumaticMode = "tendon force command rejected: driver is in pneumatic mode";
+}  // namespace
+
 CommandResult SimulatedRobot::commandValves(const std::vector<std::string>& names,
                                             const std::vector<std::uint16_t>& indices,
                                             const std::vector<double>& volts) {
-  if (config_.mode != ActuationMode::kPneumatic) {
-    ++counters_.rejected_wrong_mode;
-    return {CommandVerdict::kBadAddressing, false, "valve command rejected: driver is in force mode"};
-  }
-  return acceptCommand(checkCommand(actuators_, names, indices, volts, valve_limits_));
+  if (config_.mode != ActuationMode::kPneumatic) return applyValves({});  // counted as the wrong mode
+  checkCommand(actuators_, names, indices, volts, valve_limits_, &checked_, &seen_);
+  return acceptCommand(checked_);
 }
 
 CommandResult SimulatedRobot::commandForces(const std::vector<std::string>& names,
                                             const std::vector<std::uint16_t>& indices,
                                             const std::vector<double>& newtons) {
+  if (config_.mode != ActuationMode::kForce) return applyForces({});  // counted as the wrong mode
+  checkCommand(actuators_, names, indices, newtons, force_limits_, &checked_, &seen_);
+  return acceptCommand(checked_);
+}
+
+CheckedCommand SimulatedRobot::checkValves(const std::vector<std::string>& names,
+                                           const std::vector<std::uint16_t>& indices,
+                                           const std::vector<double>& volts) const {
+  if (config_.mode != ActuationMode::kPneumatic) return {CommandVerdict::kBadAddressing, kValvesInForceMode, {}, {}};
+  return checkCommand(actuators_, names, indices, volts, valve_limits_);
+}
+
+CheckedCommand SimulatedRobot::checkForces(const std::vector<std::string>& names,
+                                           const std::vector<std::uint16_t>& indices,
+                                           const std::vector<double>& newtons) const {
+  if (config_.mode != ActuationMode::kForce) return {CommandVerdict::kBadAddressing, kForcesInPneumaticMode, {}, {}};
+  return checkCommand(actuators_, names, indices, newtons, force_limits_);
+}
+
+CommandResult SimulatedRobot::applyValves(const CheckedCommand& checked) {
+  if (config_.mode != ActuationMode::kPneumatic) {
+    ++counters_.rejected_wrong_mode;
+    return {CommandVerdict::kBadAddressing, false, kValvesInForceMode};
+  }
+  return acceptCommand(checked);
+}
+
+CommandResult SimulatedRobot::applyForces(const CheckedCommand& checked) {
   if (config_.mode != ActuationMode::kForce) {
     ++counters_.rejected_wrong_mode;
-    return {CommandVerdict::kBadAddressing, false, "tendon force command rejected: driver is in pneumatic mode"};
+    return {CommandVerdict::kBadAddressing, false, kForcesInPneumaticMode};
   }
-  return acceptCommand(checkCommand(actuators_, names, indices, newtons, force_limits_));
+  return acceptCommand(checked);
 }
 
 // ---------------------------------------------------------------------------- safety
 
-void SimulatedRobot::enterSafeState(SafeCause cause) {
+void SimulatedRobot::enterSafeState(SafeCause cause, int cylinder, const FaultSite* fault) {
   switch (cause) {
     case SafeCause::kEstop:
       safety_.estop_latched = true;
@@ -170,10 +215,87 @@ void SimulatedRobot::enterSafeState(SafeCause cause) {
       safety_.watchdog_latched = true;
       ++counters_.watchdog_trips;
       break;
-    case SafeCause::kFault: safety_.fault_latched = true; break;
+    case SafeCause::kFault:
+      if (safety_.fault_latched) return;  // one event per entry into the latch, not per step
+      safety_.fault_latched = true;
+      ++counters_.faults;
+      break;
     case SafeCause::kNone: return;
   }
   safety_.safe_state = true;
+  SafetyEvent event;
+  event.sequence = ++counters_.safety_events;
+  event.cause = cause;
+  event.clock = clock_;
+  event.cylinder = cylinder;
+  if (cause == SafeCause::kFault && fault) {
+    event.fault = fault->source;
+    const bool in_physics = fault->source == FaultSource::kQpos || fault->source == FaultSource::kQvel ||
+                            fault->source == FaultSource::kQacc;
+    if (in_physics) {
+      event.index = fault->index;
+    } else {
+      event.cylinder = fault->index;
+    }
+  }
+  events_.last = event;
+  switch (cause) {
+    case SafeCause::kEstop: events_.estop = event; break;
+    case SafeCause::kWatchdog: events_.watchdog = event; break;
+    default:
+      events_.fault = event;
+      safety_.fault = faultText(event);  // formatted once per fault event
+      break;
+  }
+}
+
+std::string SimulatedRobot::jointName(int joint) const {
+  const char* name = mj_id2name(model_.get(), mjOBJ_JOINT, joint);
+  return name ? std::string(name) : "#" + std::to_string(joint);
+}
+
+std::string SimulatedRobot::faultText(const SafetyEvent& e) const {
+  const mjModel* m = model_.get();
+  auto cylinder = [&] {
+    return e.cylinder >= 0 && e.cylinder < static_cast<int>(cylinders_.size()) ? "'" + cylinderNames()[e.cylinder] + "'"
+                                                                              : std::string("?");
+  };
+  switch (e.fault) {
+    case FaultSource::kQpos: {
+      int joint = 0;  // the joint whose coordinates contain the address (addresses grow with the id)
+      for (int j = 0; j < m->njnt; ++j)
+        if (m->jnt_qposadr[j] <= e.index) joint = j;
+      return "bad qpos[" + std::to_string(e.index) + "] (joint '" + jointName(joint) + "')";
+    }
+    case FaultSource::kQvel:
+    case FaultSource::kQacc: {
+      const char* array = e.fault == FaultSource::kQvel ? "qvel" : "qacc";
+      const int joint = e.index >= 0 && e.index < m->nv ? m->dof_jntid[e.index] : -1;
+      return std::string("bad ") + array + "[" + std::to_string(e.index) + "] (joint '" + jointName(joint) + "')";
+    }
+    case FaultSource::kCommand: return "non-finite command for cylinder " + cylinder();
+    case FaultSource::kPressure:
+      return e.cylinder < 0 ? std::string("non-finite supply pressure") : "non-finite pressure in cylinder " + cylinder();
+    case FaultSource::kTension: return "non-finite tension of cylinder " + cylinder();
+    case FaultSource::kNone: break;
+  }
+  return "fault";
+}
+
+std::string SimulatedRobot::describe(const SafetyEvent& e) const {
+  const std::string when = " (clock " + format(e.clock) + " s, event " + std::to_string(e.sequence) + ")";
+  switch (e.cause) {
+    case SafeCause::kEstop: return "e-stop" + when;
+    case SafeCause::kWatchdog: {
+      const std::string name = e.cylinder >= 0 && e.cylinder < static_cast<int>(cylinders_.size())
+                                   ? cylinderNames()[e.cylinder]
+                                   : "?";
+      return "watchdog: '" + name + "' not commanded for " + format(config_.watchdog_timeout) + " s" + when;
+    }
+    case SafeCause::kFault: return "fault: " + faultText(e) + when;
+    case SafeCause::kNone: break;
+  }
+  return "no safety event";
 }
 
 void SimulatedRobot::estop() { enterSafeState(SafeCause::kEstop); }
@@ -197,7 +319,8 @@ bool SimulatedRobot::release(std::string* why) {
   // Start again from the idle command; the watchdog re-arms with the next command.
   std::fill(command_.begin(), command_.end(),
             config_.mode == ActuationMode::kPneumatic ? kIdleVolts : config_.min_tension);
-  std::fill(last_command_clock_.begin(), last_command_clock_.end(), kNever);
+  std::fill(last_command_clock_.begin(), last_command_clock_.end(), kNeverCommanded);
+  never_commanded_ = last_command_clock_.size();
   if (plant_) plant_->setSupplyEnabled(true);
   if (why) *why = was_safe ? "released" : "not in the safe state";
   return true;
@@ -205,19 +328,19 @@ bool SimulatedRobot::release(std::string* why) {
 
 // ---------------------------------------------------------------------------- stepping
 
-bool SimulatedRobot::physicsIsBad(std::string* what) const {
+bool SimulatedRobot::physicsIsBad(FaultSite* fault) const {
   const mjModel* m = model_.get();
   const mjData* d = data_.get();
   for (int i = 0; i < m->nq; ++i)
-    if (mju_isBad(d->qpos[i])) return *what = "bad qpos[" + std::to_string(i) + "]", true;
+    if (mju_isBad(d->qpos[i])) return *fault = {FaultSource::kQpos, i}, true;
   for (int i = 0; i < m->nv; ++i)
-    if (mju_isBad(d->qvel[i])) return *what = "bad qvel[" + std::to_string(i) + "]", true;
+    if (mju_isBad(d->qvel[i])) return *fault = {FaultSource::kQvel, i}, true;
   return false;
 }
 
-void SimulatedRobot::applyActuation() {
+bool SimulatedRobot::applyActuation(FaultSite* fault) {
+  *fault = FaultSite{};
   const std::size_t n = cylinders_.size();
-  const bool safe = safety_.safe_state;
   mjData* d = data_.get();
   for (std::size_t i = 0; i < n; ++i) {
     const auto& c = cylinders_[i];
@@ -225,49 +348,62 @@ void SimulatedRobot::applyActuation() {
     travel_[i] = description::pistonTravel(c, d->ten_length[c.tendon]);
     travel_rate_[i] = -d->ten_velocity[c.tendon];
   }
+  // Commands are checked on arrival, so only a restored state can carry a non-finite one.
+  // It must not act (the plant would silently read NaN volts as 0 V): this step already
+  // acts as in the safe state, which the fault then latches.
+  bool safe = safety_.safe_state;
+  for (std::size_t i = 0; i < n && !safe; ++i)
+    if (!std::isfinite(command_[i])) *fault = {FaultSource::kCommand, static_cast<int>(i)}, safe = true;
   if (plant_) {
     for (std::size_t i = 0; i < n; ++i) applied_command_[i] = safe ? kExhaustVolts : command_[i];
     plant_->setSupplyEnabled(!safe);
     plant_->step(config_.timestep, applied_command_.data(), travel_.data(), travel_rate_.data());
-    for (std::size_t i = 0; i < n; ++i)
-      d->ctrl[cylinders_[i].actuator] =
-          std::clamp(std::max(config_.min_tension, plant_->tension(i)), 0.0, cylinders_[i].max_tension);
+    // A non-finite pressure or tension out of the plant is a fault; it never reaches ctrl
+    // (the cylinder gets the slack-avoiding minimum while the step is refused).
+    const auto& pressure = plant_->pressure();
+    if (!std::isfinite(plant_->supplyPressure()) && fault->source == FaultSource::kNone)
+      *fault = {FaultSource::kPressure, -1};
+    for (std::size_t i = 0; i < n; ++i) {
+      double tension = plant_->tension(i);
+      if (!std::isfinite(pressure[i]) || !std::isfinite(tension)) {
+        if (fault->source == FaultSource::kNone)
+          *fault = {std::isfinite(pressure[i]) ? FaultSource::kTension : FaultSource::kPressure, static_cast<int>(i)};
+        tension = config_.min_tension;
+      }
+      d->ctrl[cylinders_[i].actuator] = std::clamp(std::max(config_.min_tension, tension), 0.0, cylinders_[i].max_tension);
+    }
   } else {
     for (std::size_t i = 0; i < n; ++i) {
       applied_command_[i] = safe ? config_.min_tension : std::max(config_.min_tension, command_[i]);
       d->ctrl[cylinders_[i].actuator] = std::clamp(applied_command_[i], 0.0, cylinders_[i].max_tension);
     }
   }
+  return fault->source == FaultSource::kNone;
 }
 
 // mj_step split open so that (1) the plant sees the piston travel of the current state and
 // (2) a bad state is refused instead of being silently reset: MuJoCo's own checks in
 // mj_step reset mjData on bad qpos/qvel/qacc, which would erase the evidence.
-bool SimulatedRobot::physicsStep() {
+bool SimulatedRobot::physicsStep(FaultSite* fault) {
   const mjModel* m = model_.get();
   mjData* d = data_.get();
-  std::string what;
-  if (physicsIsBad(&what)) {
+  if (physicsIsBad(fault)) {
     // Pressures still evolve (the safe state exhausts them); physics stays frozen.
-    applyActuation();
-    safety_.fault = safety_.fault.empty() ? what : safety_.fault;
+    FaultSite ignored;
+    applyActuation(&ignored);
     return false;
   }
   mj_fwdPosition(m, d);
   mj_sensorPos(m, d);
   mj_fwdVelocity(m, d);
   mj_sensorVel(m, d);
-  applyActuation();
+  if (!applyActuation(fault)) return false;  // refused: the physics does not advance
   mj_fwdActuation(m, d);
   mj_fwdAcceleration(m, d);
   mj_fwdConstraint(m, d);
   mj_sensorAcc(m, d);
-  for (int i = 0; i < m->nv; ++i) {
-    if (mju_isBad(d->qacc[i])) {
-      if (safety_.fault.empty()) safety_.fault = "bad qacc[" + std::to_string(i) + "]";
-      return false;
-    }
-  }
+  for (int i = 0; i < m->nv; ++i)
+    if (mju_isBad(d->qacc[i])) return *fault = {FaultSource::kQacc, i}, false;
   if (m->opt.integrator == mjINT_RK4) {
     mj_RungeKutta(m, d, 4);
   } else {
@@ -277,20 +413,23 @@ bool SimulatedRobot::physicsStep() {
 }
 
 void SimulatedRobot::step() {
-  // Watchdog: every cylinder a controller has commanded must keep being commanded.
+  // Watchdog: every cylinder a controller has commanded must keep being commanded. The
+  // stalest one is the cause recorded when it trips.
   if (!safety_.safe_state && safety_.watchdog_armed) {
-    for (double t : last_command_clock_) {
-      if (t != kNever && clock_ - t >= config_.watchdog_timeout - 1e-9) {
-        enterSafeState(SafeCause::kWatchdog);
-        break;
-      }
+    int stalest = -1;
+    for (std::size_t i = 0; i < last_command_clock_.size(); ++i) {
+      const double t = last_command_clock_[i];
+      if (t != kNeverCommanded && (stalest < 0 || t < last_command_clock_[stalest])) stalest = static_cast<int>(i);
     }
+    if (stalest >= 0 && clock_ - last_command_clock_[stalest] >= config_.watchdog_timeout - 1e-9)
+      enterSafeState(SafeCause::kWatchdog, stalest);
   }
-  const bool ok = physicsStep();
+  FaultSite fault;
+  const bool ok = physicsStep(&fault);
   safety_.fault_persists = !ok;
   if (!ok) {
-    ++counters_.faults;
-    enterSafeState(SafeCause::kFault);
+    ++counters_.faulted_steps;
+    enterSafeState(SafeCause::kFault, -1, &fault);
   }
   clock_ += config_.timestep;
   ++counters_.steps;
@@ -439,6 +578,58 @@ bool SimulatedRobot::resetToKeyframe(const std::string& keyframe, std::string* e
   return true;
 }
 
+// Finite but absurd states (qpos 1e300, a joint far outside its range, a quaternion of
+// norm 2, qvel 1e6) would be accepted and then fault in the next step; refuse them here,
+// naming the joint.
+bool SimulatedRobot::checkResetState(const std::vector<double>& qpos, const std::vector<double>& qvel,
+                                     std::string* error) const {
+  const mjModel* m = model_.get();
+  auto fail = [&](const std::string& what) {
+    if (error) *error = what;
+    return false;
+  };
+  auto unitQuaternion = [](const double* q) {
+    const double norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    return std::abs(norm - 1.0) <= kQuaternionTolerance ? -1.0 : norm;  // -1: fine, else the norm
+  };
+  for (int j = 0; j < m->njnt && !qpos.empty(); ++j) {
+    const double* q = qpos.data() + m->jnt_qposadr[j];
+    auto name = [&] { return "joint '" + jointName(j) + "'"; };
+    switch (m->jnt_type[j]) {
+      case mjJNT_FREE: {
+        const double distance = std::hypot(q[0], q[1], q[2]);  // no overflow to inf for 1e300
+        if (distance > config_.max_reset_distance)
+          return fail(name() + " position is " + format(distance) + " m from the origin, beyond max_reset_distance " +
+                      format(config_.max_reset_distance) + " m");
+        const double norm = unitQuaternion(q + 3);
+        if (norm >= 0) return fail(name() + " quaternion has norm " + format(norm) + ", must be 1");
+        break;
+      }
+      case mjJNT_BALL: {
+        const double norm = unitQuaternion(q);
+        if (norm >= 0) return fail(name() + " quaternion has norm " + format(norm) + ", must be 1");
+        break;
+      }
+      default: {  // hinge or slide
+        const double lo = m->jnt_range[2 * j], hi = m->jnt_range[2 * j + 1];
+        const double margin = config_.reset_range_margin * (hi - lo);  // soft limits (sim_config.h)
+        const char* unit = m->jnt_type[j] == mjJNT_HINGE ? " rad" : " m";
+        if (m->jnt_limited[j] && !(q[0] >= lo - margin && q[0] <= hi + margin))
+          return fail(name() + " qpos " + format(q[0]) + unit + " outside its range [" + format(lo) + ", " + format(hi) +
+                      "]" + unit + " (by more than reset_range_margin " + format(config_.reset_range_margin) +
+                      " of it)");
+        if (!(std::abs(q[0]) <= mjMAXVAL))  // unlimited: at least what MuJoCo's own check accepts
+          return fail(name() + " qpos " + format(q[0]) + unit + " beyond MuJoCo's bound " + format(mjMAXVAL));
+      }
+    }
+  }
+  for (int i = 0; i < m->nv && !qvel.empty(); ++i)
+    if (!(std::abs(qvel[i]) <= config_.max_reset_velocity))
+      return fail("joint '" + jointName(m->dof_jntid[i]) + "' qvel[" + std::to_string(i) + "] " + format(qvel[i]) +
+                  " beyond max_reset_velocity " + format(config_.max_reset_velocity) + " (rad/s or m/s)");
+  return true;
+}
+
 bool SimulatedRobot::resetToState(const std::vector<double>& qpos, const std::vector<double>& qvel,
                                   const std::vector<double>& pressure, std::string* error) {
   const mjModel* m = model_.get();
@@ -457,6 +648,7 @@ bool SimulatedRobot::resetToState(const std::vector<double>& qpos, const std::ve
   if (!allFinite(qpos) || !allFinite(qvel) || !allFinite(pressure)) return fail("state contains NaN or Inf");
   for (double p : pressure)
     if (p < 1e3 || p > 2e6) return fail("pressure " + std::to_string(p) + " Pa outside [1e3, 2e6] Pa absolute");
+  if (!checkResetState(qpos, qvel, error)) return false;
   std::string ignored;
   resetToKeyframe("", &ignored);  // model default for whatever is not given
   mjData* d = data_.get();
@@ -488,6 +680,15 @@ bool SimulatedRobot::setObjectPose(const std::array<double, 3>& position, const 
   }
   norm = std::sqrt(norm);
   if (norm < 1e-6) return fail("orientation is not a quaternion (norm ~ 0)");
+  const double distance = std::hypot(position[0], position[1], position[2]);
+  if (distance > config_.max_reset_distance)
+    return fail("position is " + format(distance) + " m from the origin, beyond max_reset_distance " +
+                format(config_.max_reset_distance) + " m");
+  for (const auto* velocity : {&linear, &angular})
+    for (double v : *velocity)
+      if (std::abs(v) > config_.max_reset_velocity)
+        return fail(std::string(velocity == &linear ? "linear" : "angular") + " velocity component " + format(v) +
+                    " beyond max_reset_velocity " + format(config_.max_reset_velocity) + " (m/s or rad/s)");
   mjData* d = data_.get();
   double* q = d->qpos + object_qpos_;
   for (int k = 0; k < 3; ++k) q[k] = position[k];

@@ -1,5 +1,6 @@
 """Small client of the simulation driver for the rostests: latest messages, stepping a
 paused simulation, commands, diagnostics."""
+import collections
 import threading
 import time
 
@@ -14,15 +15,21 @@ from std_msgs.msg import Bool
 from std_srvs.srv import SetBool, Trigger
 
 
+HISTORY = 20000
+
+
 class DriverClient:
     def __init__(self, object_odom=False):
         self.lock = threading.Lock()
         self.latest, self.count, self.clocks, self.stamps = {}, {}, [], {}
+        self.history = {}  # topic -> deque of (count, message), the newest HISTORY
+        self.safe_state = None
         topics = [("joint_states", JointState), ("actuator_states", ActuatorStates), ("diagnostics", DiagnosticArray)]
         if object_odom:
             topics.append(("object/odom", Odometry))
         self.subs = [rospy.Subscriber("/adroit/" + t, c, self._store, t, queue_size=100) for t, c in topics]
         self.subs.append(rospy.Subscriber("/clock", Clock, self._clock, queue_size=1000))
+        self.subs.append(rospy.Subscriber("/adroit/safe_state", Bool, self._safe_state, queue_size=10))
         self.valve_pub = rospy.Publisher("/adroit/valve_command", ValveCommand, queue_size=10)
         self.estop_input_pub = rospy.Publisher("/adroit/estop_input", Bool, queue_size=1, latch=True)
         for s in ("reset", "step", "pause", "estop", "estop_release", "set_object_pose"):
@@ -41,12 +48,28 @@ class DriverClient:
         with self.lock:
             self.latest[topic] = msg
             self.count[topic] = self.count.get(topic, 0) + 1
+            self.history.setdefault(topic, collections.deque(maxlen=HISTORY)).append((self.count[topic], msg))
             if hasattr(msg, "header") and topic != "diagnostics":
                 self.stamps.setdefault(topic, []).append(msg.header.stamp.to_sec())
 
     def _clock(self, msg):
         with self.lock:
             self.clocks.append(msg.clock.to_sec())
+
+    def _safe_state(self, msg):
+        with self.lock:
+            self.safe_state = msg.data
+
+    def latest_safe_state(self, timeout=2.0):
+        """The latched /adroit/safe_state, after `timeout` s for a change to arrive."""
+        time.sleep(timeout)
+        with self.lock:
+            return self.safe_state
+
+    def messages_since(self, topic, after_count):
+        """Messages of `topic` received after the first `after_count` (the newest HISTORY)."""
+        with self.lock:
+            return [m for c, m in self.history.get(topic, ()) if c > after_count]
 
     def counted(self, topic):
         with self.lock:

@@ -4,6 +4,8 @@ e-stop (pressures to atmosphere within 200 ms, commands ignored while latched, r
 refused while the input is held), command watchdog (safe state within one 200 Hz control
 period of the timeout), and bad commands (rejected, counted, the node keeps running)."""
 import math
+import re
+import threading
 import time
 import unittest
 
@@ -40,6 +42,45 @@ class LockstepSafety(unittest.TestCase):
             time.sleep(0.02)
             t, msg = self.d.step(10)
         return msg
+
+    def test_estop_during_a_long_step_is_served_at_once_and_cancels_it(self):
+        """A /step of 400 000 steps (800 simulated seconds) is running: the e-stop service
+        must answer at once (its own queue and thread), latch the safe state, and stop the
+        stepping within one control period of simulated time."""
+        d = self.d
+        # No command since the release: the watchdog is not armed, so only the e-stop can
+        # bring the safe state here.
+        self.assertFalse(d.latest_safe_state())
+        step_result = {}
+        stepper = threading.Thread(target=lambda: step_result.update(r=d.step_srv(steps=400000)))
+        stepper.start()
+        time.sleep(1.0)  # well into the request
+        self.assertTrue(stepper.is_alive(), "precondition: the long step is still running")
+        count_before = d.counted("actuator_states")
+        t0 = time.time()
+        answer = d.estop()
+        estop_latency = time.time() - t0
+        stepper.join(timeout=5.0)
+        self.assertFalse(stepper.is_alive(), "the e-stop did not cancel the running /step")
+        print("e-stop answered after %.1f ms during a long /step" % (estop_latency * 1e3))
+        self.assertTrue(answer.success)
+        self.assertLess(estop_latency, 0.5, "e-stop served only after %.2f s" % estop_latency)
+        r = step_result["r"]
+        self.assertFalse(r.success)
+        self.assertIn("cancelled by /adroit/estop", r.message)
+        latched_at = float(re.search(r"at simulated time ([0-9.]+) s", answer.message).group(1))
+        self.assertLessEqual(r.sim_time - latched_at, CONTROL_PERIOD + 1e-9,
+                             "stepping went on %.4f s (simulated) after the e-stop" % (r.sim_time - latched_at))
+        # Every state published after the latch shows every valve open to exhaust.
+        after = [m for m in d.messages_since("actuator_states", count_before)
+                 if m.header.stamp.to_sec() > latched_at + 1e-9]
+        self.assertTrue(all(v == -5.0 for m in after for v in m.command))
+        self.assertEqual(d.latest_safe_state(), True)
+
+    def test_step_requests_are_bounded(self):
+        r = self.d.step_srv(steps=500001)
+        self.assertFalse(r.success)
+        self.assertIn("at most 500000 steps per request", r.message)
 
     def test_estop_exhausts_within_200ms_ignores_commands_and_latches(self):
         d = self.d

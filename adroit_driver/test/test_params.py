@@ -25,7 +25,7 @@ class Params(unittest.TestCase):
             self.assertIn(text, fatal[0])
 
     def test_unknown_scene(self):
-        self.check("bad_scene", ["_scene:=nope"], "unknown scene 'nope' (known:", "arm_hand")
+        self.check("bad_scene", ["_scene:=nope"], "bad parameter /bad_scene/scene:", "unknown scene 'nope' (known:", "arm_hand")
 
     def test_malformed_model_names_the_path_and_mujocos_message(self):
         with tempfile.NamedTemporaryFile("w", suffix=".xml", delete=False) as f:
@@ -40,12 +40,12 @@ class Params(unittest.TestCase):
         self.check("bad_watchdog_low", ["_watchdog_timeout:=0.001"], "~watchdog_timeout")
 
     def test_mode_and_rates(self):
-        self.check("bad_mode", ["_mode:=hydraulic"], "~mode", "hydraulic")
+        self.check("bad_mode", ["_mode:=hydraulic"], "bad parameter /bad_mode/mode:", "hydraulic")
         self.check("bad_rate", ["_joint_state_rate:=300.0"], "~joint_state_rate")
-        self.check("bad_lockstep", ["_realtime:=false"], "~realtime", "/use_sim_time")
-        self.check("bad_type", ["_timestep:=fast"], "~timestep")
-        self.check("bad_priority", ["_realtime_priority:=120"], "~realtime_priority", "[0, 99]")
-        self.check("bad_nice", ["_lockstep_nice:=5"], "~lockstep_nice", "[-20, 0]")
+        self.check("bad_lockstep", ["_realtime:=false"], "bad parameter /bad_lockstep/realtime:", "/use_sim_time")
+        self.check("bad_type", ["_timestep:=fast"], "bad parameter /bad_type/timestep: expected a number")
+        self.check("bad_priority", ["_realtime_priority:=120"], "bad parameter /bad_priority/realtime_priority:", "[0, 99]")
+        self.check("bad_nice", ["_lockstep_nice:=5"], "bad parameter /bad_nice/lockstep_nice:", "[-20, 0]")
 
 
 if __name__ == "__main__":

@@ -116,6 +116,54 @@ class ResetState(unittest.TestCase):
         self.assertFalse(self.d.reset(pressure=[float("nan")] * N).success)
         self.assertTrue(self.d.step_srv(1).success, "node still running")
 
+    def test_finite_but_absurd_states_are_refused_and_nothing_faults(self):
+        """qpos 1e300, qvel 1e6, an object 1e300 m away, a joint far outside its range or a
+        non-unit quaternion would all fault the next step: each is refused with a message
+        naming the joint, the robot keeps stepping, no fault latches and every published
+        value stays finite."""
+        d = self.d
+        nq = sum(q for _, q, _ in self.layout)
+        nv = sum(v for _, _, v in self.layout)
+        self.assertTrue(d.reset(keyframe="home").success)
+        cases = {"qpos 1e300": dict(qpos=[1e300] * nq),
+                 "qvel 1e6": dict(qvel=[1e6] * nv)}
+        quat_bad, out_of_range = [0.0] * nq, [0.0] * nq
+        k = 0
+        for name, q, _ in self.layout:
+            if q == 7:
+                quat_bad[k:k + 7] = [0.0, 0.0, 0.1, 0.5, 0.0, 0.0, 0.0]  # norm 0.5
+                out_of_range[k:k + 7] = [0.0, 0.0, 0.1, 1.0, 0.0, 0.0, 0.0]
+                quat_bad_joint = name
+            k += q
+        adr = 0
+        for first_hinge, q, _ in self.layout:
+            if q == 1:
+                break
+            adr += q
+        out_of_range[adr] = 50.0  # rad: far outside any range
+        cases["quaternion norm 0.5"] = dict(qpos=quat_bad)
+        cases["joint 50 rad"] = dict(qpos=out_of_range)
+        for what, state in cases.items():
+            r = d.reset(**state)
+            self.assertFalse(r.success, what)
+            self.assertTrue(r.message, what)
+        self.assertIn(quat_bad_joint, d.reset(qpos=quat_bad).message)
+        self.assertIn(first_hinge, d.reset(qpos=out_of_range).message)
+        far = Pose()
+        far.position.x, far.orientation.w = 1e300, 1.0
+        r = d.set_object_pose(pose=far, twist=Twist())
+        self.assertFalse(r.success)
+        self.assertIn("max_reset_distance", r.message)
+        # The robot is untouched: it steps, publishes finite states and latches nothing.
+        t, msg = d.step(50)
+        self.assertTrue(all(math.isfinite(x) for x in msg.pressure + msg.force + msg.length))
+        joints = d.wait_new("joint_states", 0)
+        self.assertTrue(all(math.isfinite(x) for x in joints.position))
+        diag = d.diagnostics()
+        self.assertEqual(diag["fault_latched"], "false")
+        self.assertEqual(diag["faults"], "0")
+        self.assertEqual(diag["nonfinite_states_suppressed"], "0")
+
     def test_each_requested_step_publishes_its_own_clock(self):
         # Free-running lockstep publishes one /clock per chunk of steps; stepped on request,
         # one step at a time, every step's time must go out (a controller waits for it).

@@ -32,6 +32,76 @@ TEST(DelayLine, GivesNewestFrameOldEnoughAndOldestBeforeHistory) {
   EXPECT_EQ(line.at(0.002)[0], 2);
 }
 
+// The ring buffer behaves as the plain list it replaces (a reference implemented on a
+// vector here) through wrap-arounds, growth, clears and time shifts.
+TEST(DelayLine, RingMatchesAPlainListThroughWrapAroundGrowthAndShifts) {
+  struct Reference {
+    std::vector<std::pair<double, std::vector<double>>> frames;
+    const std::vector<double>& at(double t) {
+      while (frames.size() >= 2 && frames[1].first <= t + 1e-9) frames.erase(frames.begin());
+      return frames.front().second;
+    }
+  };
+  for (const bool reserved : {true, false}) {
+    DelayLine line;
+    if (reserved) line.reserve(6, 3);  // delays up to 3 ms at 1 ms pushes: ceil(3) + 3 frames
+    Reference ref;
+    double t = 0;
+    for (int k = 0; k < 500; ++k) {
+      t += 0.001;
+      const std::vector<double> frame = {t, -t, static_cast<double>(k)};
+      line.push(t, frame);
+      ref.frames.emplace_back(t, frame);
+      const double delay = (k / 100) % 2 ? 0.0015 : 0.0005 * (k % 7);  // varying reads, some far back
+      ASSERT_EQ(line.at(t - delay), ref.at(t - delay)) << "step " << k << (reserved ? " reserved" : "");
+      ASSERT_EQ(line.size(), ref.frames.size());
+      if (k == 250) {
+        line.shiftTime(0.5);
+        for (auto& f : ref.frames) f.first += 0.5;
+        t += 0.5;
+      }
+      if (k == 300) {
+        line.clear();
+        ref.frames.clear();
+        EXPECT_TRUE(line.empty());
+      }
+    }
+    if (reserved) {
+      EXPECT_EQ(line.capacity(), 6u) << "a line that was reserved enough never grows";
+    }
+  }
+}
+
+TEST(DelayLine, OlderFramesStayReadableUntilPassed) {
+  DelayLine line;
+  line.reserve(3, 1);
+  for (int k = 0; k < 3; ++k) line.push(0.001 * k, {static_cast<double>(k)});
+  EXPECT_EQ(line.at(-1.0)[0], 0);  // the oldest
+  line.push(0.003, {3.0});         // full: grows rather than dropping the frame still needed
+  EXPECT_EQ(line.at(-1.0)[0], 0);
+  EXPECT_EQ(line.at(0.0025)[0], 2);
+  EXPECT_EQ(line.at(0.01)[0], 3);
+  EXPECT_EQ(line.size(), 1u);
+}
+
+TEST(SensorPipeline, ValuesAreFiniteUnlessTheTruthIsNot) {
+  SensorRealism params;
+  SensorPipeline p(params, ActuationMode::kPneumatic, {1e-4}, 101325.0, 0.0, 0.002);
+  p.restart(0.0, truthAt(0.0));
+  for (int k = 1; k <= 10; ++k) p.update(0.002 * k, 0.002, truthAt(0.0));
+  EXPECT_TRUE(allFinite(p.sensed()));
+  Signals bad = truthAt(0.0);
+  bad.pressure[0] = std::nan("");
+  for (int k = 11; k <= 20; ++k) p.update(0.002 * k, 0.002, bad);
+  EXPECT_FALSE(allFinite(p.sensed()));
+  Signals s = p.sensed();
+  s.pressure[0] = 1.0;
+  s.tension[0] = 1.0;
+  EXPECT_TRUE(allFinite(s));
+  s.object[12] = INFINITY;
+  EXPECT_FALSE(allFinite(s));
+}
+
 TEST(SensorPipeline, WithoutRealismReportsTruthImmediately) {
   SensorRealism params;
   params.enabled = false;

@@ -286,6 +286,41 @@ TEST(SimulatedRobot, BadCommandsAreRejectedCountedAndChangeNothing) {
   EXPECT_FALSE(robot.safety().safe_state);
 }
 
+// check*() then apply*() (a threaded caller) does what command*() does, counts included.
+TEST(SimulatedRobot, CheckThenApplyIsTheSameAsCommand) {
+  SimulatedRobot split(config("hand")), whole(config("hand"));
+  const std::vector<std::vector<double>> commands = {{1.0, 2.0}, {1.0, std::nan("")}, {1.0, 7.0}, {1.0}};
+  for (const auto& volts : commands) {
+    const std::vector<std::uint16_t> index = {3, 5};
+    const CommandResult a = split.applyValves(split.checkValves({}, index, volts));
+    const CommandResult b = whole.commandValves({}, index, volts);
+    EXPECT_EQ(a.verdict, b.verdict);
+    EXPECT_EQ(a.applied, b.applied);
+    EXPECT_EQ(a.error, b.error);
+  }
+  EXPECT_EQ(split.applyForces(split.checkForces({"A_FFJ3_flex"}, {}, {1.0})).applied, false);  // wrong mode
+  whole.commandForces({"A_FFJ3_flex"}, {}, {1.0});
+  const Counters &cs = split.counters(), &cw = whole.counters();
+  EXPECT_EQ(cs.accepted, cw.accepted);
+  EXPECT_EQ(cs.rejected_not_finite, cw.rejected_not_finite);
+  EXPECT_EQ(cs.rejected_range, cw.rejected_range);
+  EXPECT_EQ(cs.rejected_addressing, cw.rejected_addressing);
+  EXPECT_EQ(cs.rejected_wrong_mode, 1u);
+  EXPECT_EQ(cw.rejected_wrong_mode, 1u);
+  split.step();
+  whole.step();
+  EXPECT_EQ(split.appliedCommand(), whole.appliedCommand());
+  EXPECT_EQ(split.appliedCommand()[5], 2.0);
+
+  SimulatedRobot force(config("hand", ActuationMode::kForce));
+  const CommandResult clamped = force.applyForces(force.checkForces({"A_FFJ3_flex"}, {}, {1e4}));
+  EXPECT_TRUE(clamped.applied);
+  EXPECT_EQ(clamped.verdict, CommandVerdict::kClamped);
+  EXPECT_FALSE(force.applyValves(force.checkValves({"A_FFJ3_flex"}, {}, {1.0})).applied);
+  EXPECT_EQ(force.counters().rejected_wrong_mode, 1u);
+  EXPECT_EQ(force.counters().clamped, 1u);
+}
+
 TEST(SimulatedRobot, ForceModeAppliesPullOnlyTensionsWithTheSlackMinimum) {
   SimulatedRobot robot(config("hand", ActuationMode::kForce, false));
   const double min_tension = robot.config().min_tension;
@@ -355,6 +390,347 @@ TEST(SimulatedRobot, BadPhysicsIsAFaultThatIsNotSilentlyErased) {
   robot.step();
   EXPECT_FALSE(robot.safety().fault_persists);
   EXPECT_TRUE(robot.release(&why)) << why;
+}
+
+// --- issue 10: absurd but finite states, safety events, NaN in the plant, never-commanded
+// cylinders, non-finite sensed values.
+
+int jointIndex(const SimulatedRobot& robot, const std::string& name) {
+  return mj_name2id(robot.model(), mjOBJ_JOINT, name.c_str());
+}
+
+// Refused states leave the robot as it was and stepping on faults nothing.
+void expectUnchangedAndHealthy(SimulatedRobot& robot, const std::vector<double>& q, const std::vector<double>& v) {
+  EXPECT_EQ(qpos(robot), q);
+  EXPECT_EQ(qvel(robot), v);
+  for (int k = 0; k < 50; ++k) robot.step();
+  EXPECT_FALSE(robot.safety().fault_latched) << robot.safety().fault;
+}
+
+TEST(SimulatedRobot, ResetRefusesAbsurdButFiniteStatesNamingTheJoint) {
+  SimulatedRobot robot(config("ball", ActuationMode::kPneumatic, false));
+  const mjModel* m = robot.model();
+  const auto q0 = qpos(robot), v0 = qvel(robot);
+  const int object = jointIndex(robot, "object_root"), thj0 = jointIndex(robot, "THJ0"), arj2 = jointIndex(robot, "ARJ2");
+  ASSERT_GE(object, 0);
+  ASSERT_GE(thj0, 0);
+  const int obj_q = m->jnt_qposadr[object], obj_v = m->jnt_dofadr[object];
+  std::string error;
+  auto refused = [&](std::vector<double> q, std::vector<double> v, const std::vector<std::string>& words) {
+    error.clear();
+    EXPECT_FALSE(robot.resetToState(q, v, {}, &error));
+    for (const auto& w : words) EXPECT_NE(error.find(w), std::string::npos) << "'" << w << "' not in: " << error;
+  };
+  std::vector<double> q = q0;
+  q[obj_q] = 1e300;  // the object, far away
+  refused(q, {}, {"object_root", "1e+300", "max_reset_distance"});
+  q = q0;
+  q[obj_q + 2] = 10.5;
+  refused(q, {}, {"object_root", "10.5"});
+  q = q0;
+  for (int k = 3; k < 7; ++k) q[obj_q + k] *= 2.0;  // quaternion of norm 2
+  refused(q, {}, {"object_root", "quaternion", "norm 2"});
+  q = q0;
+  q[obj_q + 3] += 1e-5;  // norm 1 + 1e-5: beyond the tolerance
+  refused(q, {}, {"object_root", "quaternion"});
+  q = q0;
+  q[m->jnt_qposadr[thj0]] = 0.3;  // THJ0's range is [-1.571, 0]: 0.24 beyond it is allowed
+  refused(q, {}, {"THJ0", "0.3", "range"});
+  q = q0;
+  q[m->jnt_qposadr[arj2]] = 1e300;
+  refused(q, {}, {"ARJ2", "1e+300"});
+  q = q0;
+  const double arj2_width = m->jnt_range[2 * arj2 + 1] - m->jnt_range[2 * arj2];
+  const double margin = robot.config().reset_range_margin;
+  q[m->jnt_qposadr[arj2]] = m->jnt_range[2 * arj2] - (margin + 0.01) * arj2_width;  // just beyond the margin
+  refused(q, {}, {"ARJ2", "range"});
+  std::vector<double> v(m->nv, 0.0);
+  v[m->jnt_dofadr[arj2]] = 1e6;
+  refused({}, v, {"ARJ2", "1e+06", "max_reset_velocity"});
+  v.assign(m->nv, 0.0);
+  v[obj_v + 4] = -51.0;  // object spinning
+  refused({}, v, {"object_root", "-51"});
+  expectUnchangedAndHealthy(robot, q0, v0);
+
+  // Within the bounds, including the edges: accepted.
+  ASSERT_TRUE(robot.resetToKeyframe("rest", &error));
+  const auto rest = qpos(robot);
+  q = rest;
+  q[m->jnt_qposadr[thj0]] = 0.0;
+  q[m->jnt_qposadr[arj2]] = m->jnt_range[2 * arj2] - (margin - 0.01) * arj2_width;  // within the margin
+  q[obj_q + 3] += 5e-7;  // within the quaternion tolerance
+  v.assign(m->nv, 0.0);
+  v[m->jnt_dofadr[arj2]] = 50.0;
+  EXPECT_TRUE(robot.resetToState(q, v, {}, &error)) << error;
+
+  // A tighter configured bound applies.
+  SimConfig c = config("ball", ActuationMode::kPneumatic, false);
+  c.max_reset_velocity = 1.0;
+  c.reset_range_margin = 0.0;
+  SimulatedRobot strict(c);
+  v.assign(m->nv, 0.0);
+  v[m->jnt_dofadr[arj2]] = 1.5;
+  EXPECT_FALSE(strict.resetToState({}, v, {}, &error));
+  EXPECT_NE(error.find("ARJ2"), std::string::npos) << error;
+  q = rest;
+  q[m->jnt_qposadr[thj0]] = 1e-9;
+  EXPECT_FALSE(strict.resetToState(q, {}, {}, &error));
+  EXPECT_NE(error.find("THJ0"), std::string::npos) << error;
+  c.max_reset_distance = -1.0;
+  EXPECT_THROW(SimulatedRobot bad(c), std::invalid_argument);
+}
+
+// The generated scenes have neither ball joints nor unlimited hinges: a small model has.
+TEST(SimulatedRobot, ResetChecksBallJointsAndUnlimitedHinges) {
+  const std::string path = ::testing::TempDir() + "/reset_joints.xml";
+  std::ofstream(path) << "<mujoco><worldbody>"
+                         "<body><joint name='spin' type='hinge'/><geom size='0.1'/>"
+                         "<body pos='0 0 1'><joint name='swivel' type='ball'/><geom size='0.1'/></body></body>"
+                         "</worldbody></mujoco>";
+  SimConfig c = config("hand", ActuationMode::kForce);
+  c.model_path = path;
+  c.initial_keyframe = "";
+  SimulatedRobot robot(c);
+  ASSERT_EQ(robot.model()->nq, 5);  // spin, then swivel's quaternion
+  std::string error;
+  EXPECT_TRUE(robot.resetToState({100.0, 1, 0, 0, 0}, {}, {}, &error)) << error;  // unlimited: any sane angle
+  EXPECT_FALSE(robot.resetToState({1e300, 1, 0, 0, 0}, {}, {}, &error));
+  EXPECT_NE(error.find("spin"), std::string::npos) << error;
+  EXPECT_FALSE(robot.resetToState({0, 0.5, 0, 0, 0}, {}, {}, &error));
+  EXPECT_NE(error.find("swivel"), std::string::npos) << error;
+  EXPECT_NE(error.find("0.5"), std::string::npos) << error;
+  EXPECT_FALSE(robot.resetToState({}, {0, 0, 0, 60}, {}, &error));
+  EXPECT_NE(error.find("swivel"), std::string::npos) << error;
+}
+
+TEST(SimulatedRobot, SetObjectPoseRefusesFarPositionsAndFastVelocities) {
+  SimulatedRobot robot(config("ball", ActuationMode::kPneumatic, false));
+  const auto q0 = qpos(robot), v0 = qvel(robot);
+  std::string error;
+  EXPECT_FALSE(robot.setObjectPose({1e300, 0, 0}, {1, 0, 0, 0}, {0, 0, 0}, {0, 0, 0}, &error));
+  EXPECT_NE(error.find("1e+300"), std::string::npos) << error;
+  EXPECT_FALSE(robot.setObjectPose({0, 0, 10.01}, {1, 0, 0, 0}, {0, 0, 0}, {0, 0, 0}, &error));
+  EXPECT_FALSE(robot.setObjectPose({0, 0, 0.1}, {1, 0, 0, 0}, {0, 1e6, 0}, {0, 0, 0}, &error));
+  EXPECT_NE(error.find("linear"), std::string::npos) << error;
+  EXPECT_FALSE(robot.setObjectPose({0, 0, 0.1}, {1, 0, 0, 0}, {0, 0, 0}, {0, 0, -60}, &error));
+  EXPECT_NE(error.find("angular"), std::string::npos) << error;
+  expectUnchangedAndHealthy(robot, q0, v0);
+  EXPECT_TRUE(robot.setObjectPose({0, 0, 0.1}, {1, 0, 0, 0}, {0, 0, 50}, {0, 50, 0}, &error)) << error;
+}
+
+// MuJoCo's limits are soft: a joint pressing on its limit sits slightly beyond it. Whatever
+// the simulation produced must be accepted back by a reset (a controller saving and
+// restoring states).
+TEST(SimulatedRobot, StatesTheSimulationProducesAreAcceptedBack) {
+  SimulatedRobot robot(config("arm_hand", ActuationMode::kPneumatic, false));
+  const mjModel* m = robot.model();
+  // Every flexor at full supply, every extensor exhausted: fingers and wrist onto their
+  // limits; then an e-stop lets the arm fall onto its limits under gravity.
+  const auto& names = robot.cylinderNames();
+  std::vector<double> volts(names.size());
+  for (std::size_t i = 0; i < names.size(); ++i) volts[i] = names[i].find("_flex") != std::string::npos ? 5.0 : -5.0;
+  double deepest = 0.0;  // beyond a limit, as a fraction of the joint's range
+  std::string deepest_joint;
+  auto penetration = [&] {
+    for (int j = 0; j < m->njnt; ++j) {
+      if (!m->jnt_limited[j]) continue;
+      const double x = robot.data()->qpos[m->jnt_qposadr[j]], lo = m->jnt_range[2 * j], hi = m->jnt_range[2 * j + 1];
+      const double beyond = std::max(lo - x, x - hi) / (hi - lo);
+      if (beyond > deepest) {
+        deepest = beyond;
+        deepest_joint = mj_id2name(m, mjOBJ_JOINT, j);
+      }
+    }
+  };
+  for (int k = 0; k < 750; ++k) {
+    if (k % 2 == 0) {
+      ASSERT_TRUE(robot.commandValves(names, {}, volts).applied);
+    }
+    robot.step();
+    penetration();
+    if (k % 250 == 249) {  // a state saved while pressing on the limits is accepted back
+      std::string error;
+      SimulatedRobot copy(config("arm_hand", ActuationMode::kPneumatic, false));
+      EXPECT_TRUE(copy.resetToState(qpos(robot), qvel(robot), {}, &error)) << error;
+    }
+  }
+  robot.estop();
+  for (int k = 0; k < 750; ++k) {
+    robot.step();
+    penetration();
+  }
+  std::printf("deepest limit penetration: %.3f of the range (%s)\n", deepest, deepest_joint.c_str());
+  EXPECT_LE(deepest, robot.config().reset_range_margin) << deepest_joint;
+  std::string error;
+  EXPECT_TRUE(robot.resetToState(qpos(robot), qvel(robot), {}, &error)) << error;
+}
+
+TEST(SimulatedRobot, FaultsCountAsEventsNotAsSteps) {
+  SimulatedRobot robot(config("hand", ActuationMode::kPneumatic, false));
+  drive(robot, 1.0, 20);
+  const auto events_before = robot.counters().safety_events;
+  SimState s = robot.state();
+  s.qvel[3] = 1e11;
+  robot.setState(s);
+  for (int k = 0; k < 100; ++k) robot.step();
+  EXPECT_EQ(robot.counters().faults, 1u);          // one event ...
+  EXPECT_EQ(robot.counters().faulted_steps, 100u);  // ... that lasted 100 steps
+  EXPECT_EQ(robot.counters().safety_events, events_before + 1);
+  const SafetyEvent& fault = robot.safetyEvents().fault;
+  EXPECT_EQ(fault.cause, SafeCause::kFault);
+  EXPECT_EQ(fault.fault, FaultSource::kQvel);
+  EXPECT_EQ(fault.index, 3);
+  EXPECT_EQ(fault.cylinder, -1);
+  EXPECT_EQ(fault.sequence, robot.counters().safety_events);
+  EXPECT_EQ(robot.safetyEvents().last.sequence, fault.sequence);
+  const std::string joint = mj_id2name(robot.model(), mjOBJ_JOINT, robot.model()->dof_jntid[3]);
+  EXPECT_NE(robot.safety().fault.find("qvel[3]"), std::string::npos) << robot.safety().fault;
+  EXPECT_NE(robot.safety().fault.find(joint), std::string::npos) << robot.safety().fault;
+  const std::string text = robot.describe(fault);
+  EXPECT_NE(text.find("fault"), std::string::npos) << text;
+  EXPECT_NE(text.find(joint), std::string::npos) << text;
+
+  // Reset, release, fault again: a second event.
+  std::string why;
+  ASSERT_TRUE(robot.resetToKeyframe("home", &why));
+  robot.step();
+  ASSERT_TRUE(robot.release(&why)) << why;
+  EXPECT_EQ(robot.safetyEvents().fault.sequence, fault.sequence) << "events survive a release";
+  s = robot.state();
+  s.qpos[5] = 1e11;
+  robot.setState(s);
+  for (int k = 0; k < 10; ++k) robot.step();
+  EXPECT_EQ(robot.counters().faults, 2u);
+  EXPECT_EQ(robot.counters().faulted_steps, 110u);
+  EXPECT_EQ(robot.safetyEvents().fault.fault, FaultSource::kQpos);
+  EXPECT_EQ(robot.safetyEvents().fault.index, 5);
+  EXPECT_EQ(robot.counters().safety_events, events_before + 2);
+}
+
+TEST(SimulatedRobot, EverySafetyEventHasASequenceNumberAndItsCause) {
+  SimulatedRobot robot(config("hand"));
+  const auto& names = robot.cylinderNames();
+  const int ffj3 = std::find(names.begin(), names.end(), "A_FFJ3_flex") - names.begin();
+  EXPECT_EQ(robot.safetyEvents().last.sequence, 0u);  // none yet
+  EXPECT_EQ(robot.safetyEvents().last.cause, SafeCause::kNone);
+
+  // 1: a watchdog trip; the stale cylinder is the cause, not the one still commanded.
+  for (int k = 0; k < 5; ++k) robot.step();
+  robot.commandValves({"A_FFJ3_flex"}, {}, {1.0});
+  const double commanded_at = robot.clock();
+  while (!robot.safety().safe_state && robot.clock() < 1.0) {
+    robot.commandValves({"A_THJ0_flex"}, {}, {1.0});
+    robot.step();
+  }
+  ASSERT_TRUE(robot.safety().watchdog_latched);
+  const SafetyEvent trip = robot.safetyEvents().watchdog;
+  EXPECT_EQ(trip.sequence, 1u);
+  EXPECT_EQ(trip.cause, SafeCause::kWatchdog);
+  EXPECT_EQ(trip.cylinder, ffj3);
+  EXPECT_GE(trip.clock - commanded_at, robot.config().watchdog_timeout - 1e-9);
+  EXPECT_LE(trip.clock - commanded_at, robot.config().watchdog_timeout + robot.timestep());
+  EXPECT_NE(robot.describe(trip).find("A_FFJ3_flex"), std::string::npos) << robot.describe(trip);
+
+  // 2: the software e-stop; 3: the e-stop input, even while latched.
+  robot.estop();
+  robot.setEstopInput(true);
+  EXPECT_EQ(robot.safetyEvents().estop.sequence, 3u);
+  EXPECT_EQ(robot.safetyEvents().last.cause, SafeCause::kEstop);
+  EXPECT_EQ(robot.safetyEvents().watchdog.sequence, 1u);  // the latest of each kind is kept
+  robot.setEstopInput(false);
+  std::string why;
+  ASSERT_TRUE(robot.release(&why)) << why;
+  const Counters& c = robot.counters();
+  EXPECT_EQ(c.safety_events, 3u);
+  EXPECT_EQ(c.safety_events, c.estops + c.watchdog_trips + c.faults);
+  EXPECT_EQ(robot.safetyEvents().last.sequence, 3u);
+}
+
+TEST(SimulatedRobot, NonFinitePlantOutputIsAFaultAndNeverReachesCtrl) {
+  SimulatedRobot robot(config("hand"));  // sensor realism on
+  drive(robot, 1.0, 50);
+  const auto q_before = qpos(robot);
+  SimState s = robot.state();
+  s.plant.pressure[7] = std::nan("");  // what a diverging plant would give
+  robot.setState(s);
+  commandAll(robot, 1.0);
+  robot.step();
+  EXPECT_TRUE(robot.safety().fault_latched);
+  EXPECT_TRUE(robot.safety().safe_state);
+  EXPECT_TRUE(robot.safety().fault_persists);
+  EXPECT_EQ(robot.safetyEvents().fault.fault, FaultSource::kPressure);
+  EXPECT_EQ(robot.safetyEvents().fault.cylinder, 7);
+  EXPECT_NE(robot.safety().fault.find(robot.cylinderNames()[7]), std::string::npos) << robot.safety().fault;
+  EXPECT_EQ(qpos(robot), q_before) << "the step was refused";
+  for (int k = 0; k < 20; ++k) {
+    for (int a = 0; a < robot.model()->nu; ++a) ASSERT_TRUE(std::isfinite(robot.data()->ctrl[a])) << a;
+    robot.step();
+  }
+  EXPECT_EQ(robot.counters().faults, 1u);
+  EXPECT_FALSE(robot.sensedIsFinite());  // the NaN pressure reached the sensors: not to be published
+  std::string why;
+  EXPECT_FALSE(robot.release(&why));
+  ASSERT_TRUE(robot.resetToKeyframe("home", &why));
+  robot.step();
+  EXPECT_TRUE(robot.release(&why)) << why;
+  for (int k = 0; k < 20; ++k) robot.step();
+  EXPECT_TRUE(robot.sensedIsFinite());
+}
+
+TEST(SimulatedRobot, NonFiniteCommandInARestoredStateIsAFaultAndActsAsTheSafeState) {
+  for (const auto mode : {ActuationMode::kPneumatic, ActuationMode::kForce}) {
+    SimulatedRobot robot(config("hand", mode));
+    drive(robot, 2.0, 20);
+    SimState s = robot.state();
+    s.command[4] = std::nan("");  // commands are checked on arrival: only a state can carry this
+    robot.setState(s);
+    robot.step();
+    EXPECT_TRUE(robot.safety().fault_latched) << modeName(mode);
+    EXPECT_EQ(robot.safetyEvents().fault.fault, FaultSource::kCommand);
+    EXPECT_EQ(robot.safetyEvents().fault.cylinder, 4);
+    const double safe = mode == ActuationMode::kPneumatic ? -5.0 : robot.config().min_tension;
+    for (double v : robot.appliedCommand()) EXPECT_EQ(v, safe) << modeName(mode);
+    for (int a = 0; a < robot.model()->nu; ++a) EXPECT_TRUE(std::isfinite(robot.data()->ctrl[a]));
+    // The safe state does not act on the command: the fault stops persisting, release
+    // returns to the idle command.
+    robot.step();
+    EXPECT_FALSE(robot.safety().fault_persists);
+    std::string why;
+    EXPECT_TRUE(robot.release(&why)) << why;
+    robot.step();
+    EXPECT_TRUE(robot.sensedIsFinite());
+  }
+}
+
+TEST(SimulatedRobot, CylindersNeverCommandedAreCountedUntilCommanded) {
+  SimulatedRobot robot(config("hand"));
+  const std::size_t n = robot.cylinderNames().size();
+  EXPECT_EQ(robot.neverCommanded(), n);
+  ASSERT_TRUE(robot.commandValves({"A_FFJ3_flex", "A_FFJ3_ext"}, {}, {1.0, 1.0}).applied);
+  ASSERT_TRUE(robot.commandValves({"A_FFJ3_flex"}, {}, {1.0}).applied);  // again: counted once
+  EXPECT_FALSE(robot.commandValves({"A_FFJ2_flex"}, {}, {9.0}).applied);  // rejected: not commanded
+  EXPECT_EQ(robot.neverCommanded(), n - 2);
+  std::vector<std::string> never;
+  for (std::size_t i = 0; i < n; ++i)
+    if (!robot.everCommanded(i)) never.push_back(robot.cylinderNames()[i]);
+  EXPECT_EQ(never.size(), n - 2);
+  EXPECT_EQ(std::count(never.begin(), never.end(), "A_FFJ3_flex"), 0);
+  EXPECT_EQ(std::count(never.begin(), never.end(), "A_FFJ2_flex"), 1);
+  robot.estop();
+  EXPECT_FALSE(robot.commandValves({"A_FFJ2_flex"}, {}, {1.0}).applied);  // ignored while safe
+  EXPECT_EQ(robot.neverCommanded(), n - 2);
+  std::string why;
+  ASSERT_TRUE(robot.release(&why));
+  EXPECT_EQ(robot.neverCommanded(), n);  // the watchdog re-arms from scratch
+}
+
+TEST(SimulatedRobot, SensedValuesAreFiniteInNormalRunning) {
+  for (const auto mode : {ActuationMode::kPneumatic, ActuationMode::kForce}) {
+    SimulatedRobot robot(config("ball", mode));
+    EXPECT_TRUE(robot.sensedIsFinite());
+    drive(robot, mode == ActuationMode::kPneumatic ? 2.0 : 5.0, 100);
+    EXPECT_TRUE(robot.sensedIsFinite()) << modeName(mode);
+  }
 }
 
 }  // namespace

@@ -51,4 +51,11 @@ CheckedCommand checkCommand(const NameIndex& actuators, const std::vector<std::s
                             const std::vector<std::uint16_t>& indices, const std::vector<double>& values,
                             const ValueLimits& limits);
 
+// The same check writing into `out`, reusing its storage and that of `seen` (scratch, one
+// flag per actuator): once they have grown to the largest command nothing is allocated,
+// except the error text of a rejected command. For the simulation's hot path.
+void checkCommand(const NameIndex& actuators, const std::vector<std::string>& names,
+                  const std::vector<std::uint16_t>& indices, const std::vector<double>& values,
+                  const ValueLimits& limits, CheckedCommand* out, std::vector<char>* seen);
+
 }  // namespace adroit::driver

@@ -5,7 +5,7 @@
 #pragma once
 
 #include <array>
-#include <deque>
+#include <cstddef>
 #include <utility>
 #include <vector>
 
@@ -29,21 +29,39 @@ struct Signals {
   std::array<double, 13> object{};
 };
 
+// True when every value of `s` is finite (no allocation; what may be published).
+bool allFinite(const Signals& s);
+
 // Frames pushed with their sample time; reading at time t gives the newest frame sampled
 // at or before t (the oldest one if none is old enough, e.g. right after a restart).
+// A ring of frame slots whose storage is reused: once reserve() has made room for the
+// frames the line holds at most (delay / update interval + a few) and for their size,
+// push() and at() never allocate. A line without enough room grows (allocating), so an
+// unreserved line still works, e.g. in tests.
 class DelayLine {
  public:
+  void reserve(std::size_t frames, std::size_t frame_size);
   void push(double time, const std::vector<double>& frame);
   const std::vector<double>& at(double time);
-  void clear() { frames_.clear(); }
-  bool empty() const { return frames_.empty(); }
+  void clear() { head_ = size_ = 0; }
+  bool empty() const { return size_ == 0; }
+  std::size_t size() const { return size_; }
+  std::size_t capacity() const { return slots_.size(); }
   void shiftTime(double delta) {
-    for (auto& f : frames_) f.first += delta;
+    for (std::size_t k = 0; k < size_; ++k) slot(k).time += delta;
   }
 
  private:
-  std::deque<std::pair<double, std::vector<double>>> frames_;
-  std::vector<std::vector<double>> spare_;  // storage of frames that have left the line
+  struct Slot {
+    double time = 0;
+    std::vector<double> values;
+  };
+  Slot& slot(std::size_t k) { return slots_[(head_ + k) % slots_.size()]; }  // k-th oldest
+  void resize(std::size_t capacity);
+
+  std::vector<Slot> slots_;
+  std::size_t head_ = 0;  // oldest frame
+  std::size_t size_ = 0;
 };
 
 class SensorPipeline {
@@ -51,8 +69,10 @@ class SensorPipeline {
   SensorPipeline() = default;
   // bore_area: per cylinder, to derive tension from the measured pressure in pneumatic
   // mode (what the hardware driver can do: there is no tension sensor).
+  // timestep: the shortest interval between updates; it sizes the delay lines at restart()
+  // so that update() never allocates (0: the lines grow as needed).
   SensorPipeline(const SensorRealism& params, ActuationMode mode, std::vector<double> bore_area,
-                 double atmospheric_pressure, double min_tension);
+                 double atmospheric_pressure, double min_tension, double timestep = 0);
 
   // Feeds the true signals at monotonic time `now`, `dt` after the previous update.
   void update(double now, double dt, const Signals& truth);
@@ -66,6 +86,7 @@ class SensorPipeline {
   const Signals& sensed() const { return sensed_; }
 
  private:
+  void reserveLines(const Signals& truth);
   void sampleJoints(double now, const Signals& truth);
   void sampleCylinders(double now, double dt, const Signals& truth, bool first);
   void sampleTouchAndObject(double now, const Signals& truth);
@@ -77,6 +98,7 @@ class SensorPipeline {
   std::vector<double> bore_area_;
   double atmospheric_pressure_ = 0;
   double min_tension_ = 0;
+  double timestep_ = 0;
   NormalNoise noise_;
   pneumatics::SensorModel cylinder_model_{1};
   double next_joint_sample_ = 0;

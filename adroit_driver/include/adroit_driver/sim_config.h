@@ -46,6 +46,16 @@ struct SimConfig {
   double min_tension = 0.3;             // ~min_tension, N: slack-avoiding lower bound (6.3)
   double supply_pressure = 620e3;       // ~supply_pressure, Pa absolute (fig. 5.9)
   std::string initial_keyframe = "home";  // ~initial_keyframe ("" = model default)
+  // Bounds of the states a reset or set_object_pose accepts: a finite but absurd state
+  // (an object 1e300 m away, a joint spinning at 1e6 rad/s) would only fault in the next step.
+  double max_reset_distance = 10.0;     // ~max_reset_distance, m: free joints (the object) from the origin
+  double max_reset_velocity = 50.0;     // ~max_reset_velocity, rad/s or m/s: every velocity coordinate
+  // A limited joint may be placed beyond a limit by this fraction of its range: MuJoCo's
+  // limits are soft and the simulation itself goes beyond them (measured on arm_hand with
+  // every flexor at full supply: 0.01-0.025 rad while pressing, up to 8.6 % of a joint's
+  // range on impact, test StatesTheSimulationProducesAreAcceptedBack), and a state saved
+  // there must be accepted back.
+  double reset_range_margin = 0.15;     // ~reset_range_margin, fraction of the joint's range, in [0, 1]
   SensorRealism sensors;
 };
 

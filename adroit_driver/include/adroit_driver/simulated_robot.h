@@ -9,6 +9,7 @@
 
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -41,6 +42,32 @@ struct SimState {
 
 enum class SafeCause { kNone = 0, kEstop = 1, kWatchdog = 2, kFault = 4 };
 
+// What a fault found not finite (or, for qpos/qvel/qacc, also beyond MuJoCo's mjMAXVAL).
+enum class FaultSource { kNone, kQpos, kQvel, kQacc, kCommand, kPressure, kTension };
+
+// One safety event: an e-stop, a watchdog trip or a fault entering its latch. Plain data,
+// recorded by the simulation thread without formatting anything; describe() turns it into
+// text on whichever thread logs it.
+struct SafetyEvent {
+  std::uint64_t sequence = 0;  // Counters::safety_events right after this event; 0 = none yet
+  SafeCause cause = SafeCause::kNone;
+  double clock = 0;            // clock() when it happened (start of the step for step events)
+  int cylinder = -1;           // watchdog: the stalest commanded cylinder; fault of a command,
+                               // pressure or tension: that cylinder; else -1
+  FaultSource fault = FaultSource::kNone;
+  int index = -1;              // fault of qpos/qvel/qacc: the address in that array
+};
+
+// The latest event of each kind. Not cleared by release(): a logger that compares
+// `last.sequence` with the one it saw last finds each event exactly once (events between
+// two looks are counted by Counters::safety_events; only the latest of a kind is kept).
+struct SafetyEvents {
+  SafetyEvent last;      // any kind
+  SafetyEvent estop;
+  SafetyEvent watchdog;
+  SafetyEvent fault;
+};
+
 struct SafetyStatus {
   bool safe_state = false;      // supply exhausted, every valve open to exhaust
   bool estop_latched = false;
@@ -49,7 +76,7 @@ struct SafetyStatus {
   bool fault_latched = false;
   bool fault_persists = false;  // the last physics step faulted
   bool watchdog_armed = false;  // a command has been received since start / release
-  std::string fault;            // description of the first latched fault
+  std::string fault;            // description of the fault that entered the latch
 };
 
 struct Counters {
@@ -64,7 +91,10 @@ struct Counters {
   std::uint64_t ignored_while_safe = 0;   // valid commands ignored while latched
   std::uint64_t watchdog_trips = 0;
   std::uint64_t estops = 0;
-  std::uint64_t faults = 0;               // physics steps refused (bad qpos/qvel/qacc/ctrl)
+  std::uint64_t faults = 0;               // fault events: entries into the fault latch (bad
+                                          // qpos/qvel/qacc, non-finite command/pressure/tension)
+  std::uint64_t faulted_steps = 0;        // physics steps refused while a fault persists
+  std::uint64_t safety_events = 0;        // estops + watchdog_trips + faults: the sequence of SafetyEvent
   std::uint64_t rejected() const {
     return rejected_addressing + rejected_name + rejected_not_finite + rejected_range + rejected_wrong_mode;
   }
@@ -82,10 +112,21 @@ class SimulatedRobot {
   explicit SimulatedRobot(const SimConfig& config);
 
   // --- commands (addressing and validation: command_check.h) ---
+  // Accepted commands allocate nothing (only a rejection formats its error text).
   CommandResult commandValves(const std::vector<std::string>& names, const std::vector<std::uint16_t>& indices,
                               const std::vector<double>& volts);
   CommandResult commandForces(const std::vector<std::string>& names, const std::vector<std::uint16_t>& indices,
                               const std::vector<double>& newtons);
+  // The same in two halves, for a caller with threads: check*() reads only what never
+  // changes (names, limits, mode), so it may run on the caller's thread without holding
+  // the robot (it allocates the result); apply*() then counts and applies under the
+  // caller's lock. apply*() takes only what check*() of this robot returned.
+  CheckedCommand checkValves(const std::vector<std::string>& names, const std::vector<std::uint16_t>& indices,
+                             const std::vector<double>& volts) const;
+  CheckedCommand checkForces(const std::vector<std::string>& names, const std::vector<std::uint16_t>& indices,
+                             const std::vector<double>& newtons) const;
+  CommandResult applyValves(const CheckedCommand& checked);
+  CommandResult applyForces(const CheckedCommand& checked);
 
   // --- one physics step (config.timestep) ---
   void step();
@@ -98,6 +139,14 @@ class SimulatedRobot {
   bool release(std::string* why);
   const SafetyStatus& safety() const { return safety_; }
   const Counters& counters() const { return counters_; }
+  const SafetyEvents& safetyEvents() const { return events_; }
+  // One line for an event, e.g. "watchdog: 'A_FFJ3_flex' not commanded for 0.05 s (clock
+  // 12.3 s)". Reads only the model's names, which never change: callable from any thread.
+  std::string describe(const SafetyEvent& event) const;
+  // Cylinders without an accepted command since start or the last release: the watchdog
+  // does not watch them (a pool that never started leaves them at idle). O(1).
+  std::size_t neverCommanded() const { return never_commanded_; }
+  bool everCommanded(std::size_t cylinder) const { return last_command_clock_[cylinder] != kNeverCommanded; }
 
   // --- state ---
   SimState state() const;
@@ -106,14 +155,24 @@ class SimulatedRobot {
   // Model default (keyframe 0 if present), or a named keyframe. Pressures atmospheric.
   bool resetToKeyframe(const std::string& keyframe, std::string* error);
   // Full state: empty qpos = model default, empty qvel = zeros, empty pressure = atmospheric.
+  // Refused (with the joint's name and value) when a limited hinge/slide joint is outside
+  // its range by more than config().reset_range_margin of it, a free or ball joint's
+  // quaternion is not of unit norm, a free joint is farther than config().max_reset_distance
+  // from the origin, or a velocity exceeds config().max_reset_velocity: such states would
+  // only fault in the next step.
   bool resetToState(const std::vector<double>& qpos, const std::vector<double>& qvel,
                     const std::vector<double>& pressure, std::string* error);
   // World-frame pose (quaternion w x y z, normalised here) and velocity of the free object.
+  // Refused beyond config().max_reset_distance from the origin or with a velocity component
+  // above config().max_reset_velocity.
   bool setObjectPose(const std::array<double, 3>& position, const std::array<double, 4>& quaternion,
                      const std::array<double, 3>& linear, const std::array<double, 3>& angular, std::string* error);
 
   // --- outputs ---
   const Signals& sensed() const { return sensors_.sensed(); }
+  // Whether every value of sensed() is finite (a faulted plant can make them NaN); no
+  // allocation, a pass over a few hundred values.
+  bool sensedIsFinite() const { return allFinite(sensors_.sensed()); }
   const Signals& truth() const { return truth_; }
   const std::vector<double>& appliedCommand() const { return applied_command_; }  // volts or N
 
@@ -133,10 +192,21 @@ class SimulatedRobot {
   const pneumatics::PneumaticPlant* plant() const { return plant_.get(); }
 
  private:
-  void enterSafeState(SafeCause cause);
-  void applyActuation();
-  bool physicsIsBad(std::string* what) const;
-  bool physicsStep();  // false when the step was refused as a fault
+  // last_command_clock_ of a cylinder not commanded since start or the last release.
+  static constexpr double kNeverCommanded = -std::numeric_limits<double>::infinity();
+
+  // Where a step found a fault (plain data: nothing is formatted unless it latches).
+  struct FaultSite {
+    FaultSource source = FaultSource::kNone;
+    int index = -1;  // qpos/qvel/qacc address, or the cylinder
+  };
+  void enterSafeState(SafeCause cause, int cylinder = -1, const FaultSite* fault = nullptr);
+  bool applyActuation(FaultSite* fault);  // false when a non-finite value would have acted
+  bool physicsIsBad(FaultSite* fault) const;
+  bool physicsStep(FaultSite* fault);  // false when the step was refused as a fault
+  bool checkResetState(const std::vector<double>& qpos, const std::vector<double>& qvel, std::string* error) const;
+  std::string jointName(int joint) const;
+  std::string faultText(const SafetyEvent& event) const;
   void computeTruth();
   void afterTeleport();  // recompute derived data and restart the sensors
   CommandResult acceptCommand(const CheckedCommand& checked);
@@ -148,6 +218,8 @@ class SimulatedRobot {
   std::vector<description::Cylinder> cylinders_;
   std::unique_ptr<pneumatics::PneumaticPlant> plant_;
   ValueLimits valve_limits_, force_limits_;
+  CheckedCommand checked_;    // workspace of checkCommand, reserved: accepting a command does not allocate
+  std::vector<char> seen_;
 
   std::vector<int> joint_ids_;  // 1-DOF joints reported in joint states
   std::vector<std::string> joint_names_;
@@ -158,13 +230,15 @@ class SimulatedRobot {
   double clock_ = 0;
   std::vector<double> command_;          // last accepted command per cylinder
   std::vector<double> applied_command_;  // what acted in the last step (safe state applied)
-  std::vector<double> last_command_clock_;
+  std::vector<double> last_command_clock_;  // kNeverCommanded until a command is accepted
+  std::size_t never_commanded_ = 0;
   std::vector<double> travel_, travel_rate_;
   Signals truth_;
   SensorPipeline sensors_;
 
   SafetyStatus safety_;
   Counters counters_;
+  SafetyEvents events_;
 };
 
 }  // namespace adroit::driver

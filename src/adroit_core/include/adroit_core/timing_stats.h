@@ -18,7 +18,11 @@ struct Summary {
 class SampleStats {
  public:
   void add(double value) { samples_.push_back(value); }
-  void clear() { samples_.clear(); }
+  // Room for n samples: adding up to capacity() allocates nothing (a real-time loop
+  // checks count() < capacity() before adding).
+  void reserve(std::size_t n) { samples_.reserve(n); }
+  std::size_t capacity() const { return samples_.capacity(); }
+  void clear() { samples_.clear(); }  // keeps the capacity
   std::size_t count() const { return samples_.size(); }
   const std::vector<double>& samples() const { return samples_; }
   Summary summary() const;

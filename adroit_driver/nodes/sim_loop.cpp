@@ -1,0 +1,189 @@
+// The simulation thread: steps the robot, paced at real time (states due at origin + k dt,
+// wall) or in lockstep (as fast as possible, or a requested number of steps while paused),
+// and queues each step's outputs for the publisher thread. After start-up it allocates
+// nothing and logs nothing; the only lock it can meet held by another thread is
+// robot_mutex_, whose other holders copy a few numbers.
+#include <pthread.h>
+#include <sched.h>
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cstring>
+
+#include "sim_driver.h"
+
+namespace adroit::driver {
+
+namespace {
+using SteadyClock = std::chrono::steady_clock;
+}  // namespace
+
+bool SimDriver::enterRealtimeScheduling() {
+  sched_param sp{};
+  sp.sched_priority = params_.realtime_priority;
+  const int error = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
+  if (error != 0) {
+    ROS_WARN("adroit_sim: ~realtime_priority %d: SCHED_FIFO not permitted (%s); stepping with normal scheduling "
+             "(grant an rtprio limit or CAP_SYS_NICE, or set ~realtime_priority: 0)",
+             params_.realtime_priority, std::strerror(error));
+    return false;
+  }
+  fifo_priority_ = params_.realtime_priority;
+  ROS_INFO("adroit_sim: simulation thread under SCHED_FIFO, priority %d", params_.realtime_priority);
+  return true;
+}
+
+void SimDriver::leaveRealtimeScheduling(const char* why) {
+  sched_param sp{};
+  pthread_setschedparam(pthread_self(), SCHED_OTHER, &sp);
+  fifo_priority_ = 0;
+  ROS_WARN("adroit_sim: leaving SCHED_FIFO: %s", why);
+}
+
+void SimDriver::raiseLockstepWeight() {
+  if (params_.lockstep_nice == 0) return;
+  if (std::thread::hardware_concurrency() < 2) {
+    ROS_WARN("adroit_sim: one CPU: ~lockstep_nice not applied, so that the other nodes keep a share of it");
+    return;
+  }
+  // Linux: a thread id as PRIO_PROCESS sets the nice value of that thread alone.
+  if (setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), params_.lockstep_nice) != 0) {
+    ROS_WARN("adroit_sim: ~lockstep_nice %d not permitted (%s); stepping at the default weight "
+             "(grant a nice limit or CAP_SYS_NICE, or set ~lockstep_nice: 0)",
+             params_.lockstep_nice, std::strerror(errno));
+    return;
+  }
+  thread_nice_ = params_.lockstep_nice;
+}
+
+void SimDriver::recordStepTiming(double step_seconds, double lateness) {
+  // try_lock: diagnostics only swap two objects under this lock, but the simulation thread
+  // must never wait for them. Adding stays within the reserved capacity.
+  std::unique_lock<std::mutex> lock(stats_mutex_, std::try_to_lock);
+  if (!lock.owns_lock() || timing_.step_time.count() >= timing_.step_time.capacity()) {
+    if (lock.owns_lock()) ++timing_.dropped;
+    return;
+  }
+  timing_.step_time.add(step_seconds);
+  if (lateness >= 0) timing_.lateness.add(lateness);
+}
+
+void SimDriver::runPendingRequest() {
+  // A reset or teleport, handed over by a service thread (changeState). It runs here,
+  // between two steps, so that no service ever holds the robot while this loop waits.
+  std::unique_lock<std::mutex> control(control_mutex_);
+  if (!pending_change_ || change_done_ || change_running_) return;
+  const auto* change = pending_change_;
+  change_running_ = true;
+  control.unlock();
+  std::string error;
+  bool ok;
+  {
+    std::lock_guard<std::mutex> lock(robot_mutex_);
+    ok = (*change)(&error);
+  }
+  std::uint64_t published = 0;
+  if (ok) {  // the new state goes out before the service answers
+    publishDue(true, wallSeconds(), true);
+    published = queuedBatches();
+  }
+  control.lock();
+  change_ok_ = ok;
+  change_error_ = error;
+  change_published_ = published;
+  change_running_ = false;
+  change_done_ = true;
+  control_cv_.notify_all();
+}
+
+void SimDriver::loop() {
+  const double dt = params_.sim.timestep;
+  // Real time: state k is published at origin + k dt (wall); computing it happens before.
+  auto origin = SteadyClock::now();
+  double origin_clock = 0;
+  bool resync = true;
+  // A SCHED_FIFO thread that never sleeps would starve its core: after this many deadlines
+  // missed in a row (the machine cannot step this scene in real time) it returns to normal
+  // scheduling.
+  constexpr int kMaxMissedInRow = 250;
+  sim_thread_id_ = syscall(SYS_gettid);
+  bool fifo = params_.realtime && params_.realtime_priority > 0 && enterRealtimeScheduling();
+  if (!params_.realtime) raiseLockstepWeight();
+  int missed_in_row = 0;
+  while (running_) {
+    runPendingRequest();
+    bool requested = false, last_requested = false;
+    {
+      std::unique_lock<std::mutex> lock(control_mutex_);
+      const auto change_waiting = [this] { return pending_change_ && !change_done_; };
+      if (change_waiting()) continue;
+      if (paused_ && pending_steps_ == 0) {
+        lock.unlock();
+        flushPublication();  // nothing follows for a while: what is queued goes out now
+        lock.lock();
+        if (paused_ && pending_steps_ == 0 && !change_waiting())
+          control_cv_.wait_for(lock, std::chrono::milliseconds(50));
+        resync = true;
+        missed_in_row = 0;
+        continue;
+      }
+      requested = paused_ && pending_steps_ > 0;
+      last_requested = requested && pending_steps_ == 1;
+    }
+    const auto compute_start = SteadyClock::now();
+    double clock_after;
+    {
+      std::lock_guard<std::mutex> lock(robot_mutex_);
+      if (resync) {
+        origin = compute_start + std::chrono::duration_cast<SteadyClock::duration>(std::chrono::duration<double>(dt));
+        origin_clock = robot_->clock();
+        wall_offset_ = std::max(wall_offset_, ros::WallTime::now().toSec() + dt - origin_clock);
+        resync = false;
+      }
+      robot_->step();
+      clock_after = robot_->clock();
+      steps_done_.store(robot_->counters().steps, std::memory_order_relaxed);
+    }
+    const auto compute_end = SteadyClock::now();
+    double lateness = -1;  // publication after the deadline (s), real time on schedule
+    if (params_.realtime && !requested) {
+      auto deadline = origin + std::chrono::duration_cast<SteadyClock::duration>(
+                                   std::chrono::duration<double>(clock_after - origin_clock - dt));
+      const double late = std::chrono::duration<double>(compute_end - deadline).count();
+      bool count_miss = false;
+      if (late > params_.max_lag) {
+        // Far behind (machine overloaded, debugger): restart the schedule from now rather
+        // than running fast to catch up.
+        resync = true;
+      } else if (late > 0) {
+        count_miss = true;
+      } else {
+        missed_in_row = -1;
+        std::this_thread::sleep_until(deadline);
+      }
+      if (resync || count_miss) {
+        std::unique_lock<std::mutex> lock(stats_mutex_, std::try_to_lock);
+        if (lock.owns_lock()) ++(resync ? timing_.resyncs : timing_.deadline_misses);
+      }
+      if (++missed_in_row >= kMaxMissedInRow && fifo) {
+        leaveRealtimeScheduling("the simulation cannot keep real time (250 deadlines missed in a row)");
+        fifo = false;
+      }
+      if (!resync) lateness = std::max(0.0, std::chrono::duration<double>(SteadyClock::now() - deadline).count());
+    }
+    // Lockstep: the publisher is woken for a few steps at a time (see kPollPeriod), and at
+    // once after the last requested step. Real time: at every state's deadline.
+    const double step_seconds = std::chrono::duration<double>(compute_end - compute_start).count();
+    publishDue(false, wallSeconds(), params_.realtime || last_requested);
+    recordStepTiming(step_seconds, lateness);
+    if (requested) {
+      std::lock_guard<std::mutex> lock(control_mutex_);
+      if (pending_steps_ > 0 && --pending_steps_ == 0) control_cv_.notify_all();
+    }
+  }
+}
+
+}  // namespace adroit::driver

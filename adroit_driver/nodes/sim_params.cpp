@@ -1,0 +1,74 @@
+// ~parameters of the simulation driver -> DriverParams, refusing bad values with one line
+// that names the parameter.
+#include <ros/param.h>
+
+#include <cmath>
+
+#include "sim_driver.h"
+
+namespace adroit::driver {
+
+int stepsPerPublication(const std::string& name, double rate, double timestep) {
+  if (!(rate > 0) || !std::isfinite(rate))
+    throw ParameterError("bad parameter ~" + name + ": must be > 0 Hz, got " + std::to_string(rate));
+  const double ratio = 1.0 / (rate * timestep);
+  const int steps = static_cast<int>(std::lround(ratio));
+  if (steps < 1 || std::abs(ratio - steps) > 1e-6)
+    throw ParameterError("bad parameter ~" + name + ": must be the step rate " + std::to_string(1.0 / timestep) +
+                         " Hz divided by a whole number, got " + std::to_string(rate));
+  return steps;
+}
+
+DriverParams readParams(const ros::NodeHandle& pnh) {
+  const rosutil::Params p(pnh);
+  DriverParams out;
+  SimConfig& c = out.sim;
+  c.model_path = p.modelPath("arm_hand");
+  const std::string mode = p.string("mode", "pneumatic");
+  const auto parsed = parseMode(mode);
+  if (!parsed) p.fail("mode", "must be 'pneumatic' or 'force', got '" + mode + "'");
+  c.mode = *parsed;
+  c.timestep = p.number("timestep", c.timestep);
+  c.watchdog_timeout = p.number("watchdog_timeout", c.watchdog_timeout);
+  c.min_tension = p.number("min_tension", c.min_tension);
+  c.supply_pressure = p.number("supply_pressure", c.supply_pressure);
+  c.initial_keyframe = p.string("initial_keyframe", c.initial_keyframe);
+  c.max_reset_distance = p.number("max_reset_distance", c.max_reset_distance);
+  c.max_reset_velocity = p.number("max_reset_velocity", c.max_reset_velocity);
+  c.reset_range_margin = p.number("reset_range_margin", c.reset_range_margin);
+  SensorRealism& s = c.sensors;
+  s.enabled = p.boolean("sensor_realism", s.enabled);
+  s.seed = static_cast<std::uint64_t>(p.integer("seed", static_cast<int>(s.seed), 0, 2147483647));
+  s.joint_rate = p.number("sensors/joint_rate", s.joint_rate);
+  s.joint_noise_std = p.number("sensors/joint_noise_std", s.joint_noise_std);
+  s.joint_velocity_noise_std = p.number("sensors/joint_velocity_noise_std", s.joint_velocity_noise_std);
+  s.joint_quantum = p.number("sensors/joint_quantum", s.joint_quantum);
+  s.joint_delay = p.number("sensors/joint_delay", s.joint_delay);
+  s.cylinder_delay = p.number("sensors/cylinder_delay", s.cylinder_delay);
+  s.cylinder.pressure_noise_std = p.number("sensors/pressure_noise_std", s.cylinder.pressure_noise_std);
+  s.cylinder.length_noise_std = p.number("sensors/length_noise_std", s.cylinder.length_noise_std);
+  s.touch_noise_std = p.number("sensors/touch_noise_std", s.touch_noise_std);
+  s.touch_delay = p.number("sensors/touch_delay", s.touch_delay);
+  s.object_noise_std = p.number("sensors/object_noise_std", s.object_noise_std);
+  s.object_delay = p.number("sensors/object_delay", s.object_delay);
+  const std::string invalid = validate(c);
+  if (!invalid.empty()) throw ParameterError("bad parameter " + invalid);
+
+  out.realtime = p.boolean("realtime", out.realtime);
+  out.start_paused = p.boolean("start_paused", out.start_paused);
+  ros::param::param<bool>("/use_sim_time", out.use_sim_time, false);
+  if (!out.realtime && !out.use_sim_time)
+    p.fail("realtime", "false (lockstep) needs /use_sim_time: true so that every node follows /clock");
+  out.joint_state_rate = p.number("joint_state_rate", out.joint_state_rate);
+  out.actuator_state_rate = p.number("actuator_state_rate", out.actuator_state_rate);
+  out.touch_rate = p.number("touch_rate", out.touch_rate);
+  out.object_rate = p.number("object_rate", out.object_rate);
+  out.marker_rate = p.number("marker_rate", out.marker_rate, 0, 100);
+  out.realtime_priority = p.integer("realtime_priority", out.realtime_priority, 0, 99);
+  out.lockstep_nice = p.integer("lockstep_nice", out.lockstep_nice, -20, 0);
+  out.diagnostics_period = p.number("diagnostics_period", out.diagnostics_period, 0.05, 60);
+  out.never_commanded_grace = p.number("never_commanded_grace", out.never_commanded_grace, 0, 3600);
+  return out;
+}
+
+}  // namespace adroit::driver

@@ -1,0 +1,201 @@
+// Publication: the simulation thread queues each step's outputs in a preallocated ring; the
+// publisher thread fills the messages, serialises and sends them (and /clock, tf, markers).
+#include <boost/make_shared.hpp>
+
+#include <chrono>
+
+#include <rosgraph_msgs/Clock.h>
+
+#include "sim_driver.h"
+
+namespace adroit::driver {
+
+void SimDriver::publishDue(bool all, double wall_now, bool flush) {
+  std::uint64_t slot_index;
+  {
+    std::unique_lock<std::mutex> lock(publish_mutex_);
+    published_cv_.wait(lock, [this] { return queued_batches_ - published_batches_ < kRingSize || !running_; });
+    if (!running_ && !all) return;
+    slot_index = queued_batches_;
+  }
+  // The slot is this thread's until queued_batches_ moves past it; its vectors keep their
+  // size, so the copies below allocate nothing.
+  Batch& batch = ring_[slot_index % kRingSize];
+  {
+    std::lock_guard<std::mutex> lock(robot_mutex_);
+    const std::uint64_t k = robot_->counters().steps;
+    // A faulted physics state may hold NaN: such a state is never published (the safe
+    // state and the fault are reported through diagnostics and /adroit/safe_state).
+    const bool finite = robot_->sensedIsFinite();
+    if (!finite) nonfinite_suppressed_.fetch_add(1, std::memory_order_relaxed);
+    batch.all = all;
+    batch.clock = params_.use_sim_time && !all;
+    batch.joints = finite && (all || k % joint_every_ == 0);
+    batch.actuators = finite && (all || k % actuator_every_ == 0);
+    batch.touch = finite && (all || k % touch_every_ == 0);
+    batch.object = finite && robot_->hasObject() && (all || k % object_every_ == 0);
+    batch.sim_clock = robot_->clock();
+    batch.stamp = stamp();
+    if (batch.joints || batch.actuators || batch.touch || batch.object) batch.signals = robot_->sensed();
+    if (batch.actuators) batch.command = robot_->appliedCommand();
+    batch.markers = false;
+    if (params_.marker_rate > 0 && markers_wanted_.load(std::memory_order_relaxed) &&
+        (all || wall_now - last_marker_wall_ >= 1.0 / params_.marker_rate)) {
+      takeMarkerSnapshot();
+      last_marker_wall_ = wall_now;
+      batch.markers = true;
+    }
+  }
+  bool wake = false;
+  {
+    std::lock_guard<std::mutex> lock(publish_mutex_);
+    ++queued_batches_;
+    // Lockstep: waking the publisher costs more than handing it a batch; a polling
+    // publisher finds the batch by itself (see kPollPeriod). The order does not change.
+    wake = publisher_idle_ ||
+           (publisher_polling_ && (flush || queued_batches_ - published_batches_ >= kRingSize / 2));
+  }
+  if (wake) work_cv_.notify_one();
+}
+
+void SimDriver::flushPublication() {
+  bool wake;
+  {
+    std::lock_guard<std::mutex> lock(publish_mutex_);
+    wake = (publisher_idle_ || publisher_polling_) && queued_batches_ > published_batches_;
+  }
+  if (wake) work_cv_.notify_one();
+}
+
+std::uint64_t SimDriver::queuedBatches() {
+  std::lock_guard<std::mutex> lock(publish_mutex_);
+  return queued_batches_;
+}
+
+void SimDriver::waitForPublication(std::uint64_t batches) {
+  // Bounded wait: a stopping driver must not hang the service thread.
+  std::unique_lock<std::mutex> lock(publish_mutex_);
+  published_cv_.wait_for(lock, std::chrono::seconds(2), [&] { return published_batches_ >= batches || !running_; });
+}
+
+void SimDriver::publishLoop() {
+  bool streaming = false;  // batches keep coming: look again by itself
+  for (;;) {
+    {
+      std::unique_lock<std::mutex> lock(publish_mutex_);
+      const auto ready = [this] { return published_batches_ < queued_batches_ || !publisher_running_; };
+      if (streaming && !ready()) {
+        publisher_polling_ = true;
+        streaming = work_cv_.wait_for(lock, kPollPeriod, ready);
+        publisher_polling_ = false;
+      }
+      if (!ready()) {  // nothing for a poll period: sleep until woken
+        publisher_idle_ = true;
+        work_cv_.wait(lock, ready);
+        publisher_idle_ = false;
+      }
+      if (published_batches_ == queued_batches_) return;  // stopping and drained
+    }
+    publishQueued();
+    streaming = true;
+  }
+}
+
+void SimDriver::publishQueued() {
+  std::uint64_t first, end;
+  {
+    std::lock_guard<std::mutex> lock(publish_mutex_);
+    first = published_batches_;
+    end = queued_batches_;  // everything queued: one wake-up for many steps
+  }
+  if (first == end) return;
+  // One /clock for the chunk, with its newest time, ahead of the chunk's messages: a stamp
+  // still never arrives ahead of the clock. Publishing every step's clock would cost every
+  // sim-time node of the graph a message per step (see README).
+  for (std::uint64_t i = end; i-- > first;) {
+    if (ring_[i % kRingSize].clock) {
+      publishClock(ring_[i % kRingSize].sim_clock);
+      break;
+    }
+  }
+  for (std::uint64_t i = first; i < end; ++i) publishBatch(ring_[i % kRingSize]);
+  {
+    std::lock_guard<std::mutex> lock(publish_mutex_);
+    published_batches_ = end;
+  }
+  published_cv_.notify_all();  // room for the simulation thread; services waiting for a republish
+}
+
+void SimDriver::publishClock(double sim_clock) {
+  // By shared pointer: this node's own /clock subscription (roscpp subscribes every node to
+  // /clock under /use_sim_time) then gets the message directly, without a serialisation.
+  auto clock = boost::make_shared<rosgraph_msgs::Clock>();
+  clock->clock = ros::Time(sim_clock);
+  clock_pub_.publish(clock);
+}
+
+void SimDriver::publishBatch(const Batch& batch) {
+  fillMessages(batch);
+  if (batch.joints) {
+    joint_pub_.publish(joint_msg_);
+    if (collect_joint_intervals_.load(std::memory_order_relaxed)) {
+      const double wall_now = wallSeconds();
+      std::lock_guard<std::mutex> lock(intervals_mutex_);
+      if (!batch.all && last_joint_wall_ > 0) joint_intervals_.push_back(wall_now - last_joint_wall_);
+      last_joint_wall_ = batch.all ? -1 : wall_now;
+    }
+  }
+  if (batch.actuators) actuator_pub_.publish(actuator_msg_);
+  if (batch.touch) touch_pub_.publish(touch_msg_);
+  if (batch.object) {
+    odom_pub_.publish(odom_msg_);
+    tf_->sendTransform(object_tf_);
+  }
+  if (batch.markers) publishMarkers();
+}
+
+void SimDriver::fillMessages(const Batch& batch) {
+  const Signals& s = batch.signals;
+  if (batch.joints) {
+    joint_msg_.header.stamp = batch.stamp;
+    joint_msg_.position = s.joint_position;
+    joint_msg_.velocity = s.joint_velocity;
+    joint_msg_.effort = s.joint_effort;
+  }
+  if (batch.actuators) {
+    actuator_msg_.header.stamp = batch.stamp;
+    actuator_msg_.pressure = s.pressure;
+    actuator_msg_.length = s.length;
+    actuator_msg_.length_rate = s.length_rate;
+    actuator_msg_.force = s.tension;
+    actuator_msg_.command = batch.command;
+    actuator_msg_.supply_pressure = s.supply_pressure;
+  }
+  if (batch.touch) {
+    touch_msg_.header.stamp = batch.stamp;
+    touch_msg_.force = s.touch;
+  }
+  if (batch.object) {
+    const auto& o = s.object;
+    odom_msg_.header.stamp = batch.stamp;
+    auto& pose = odom_msg_.pose.pose;
+    pose.position.x = o[0], pose.position.y = o[1], pose.position.z = o[2];
+    pose.orientation.w = o[3], pose.orientation.x = o[4], pose.orientation.y = o[5], pose.orientation.z = o[6];
+    // nav_msgs/Odometry: twist in the child (object) frame. MuJoCo's free joint gives the
+    // linear velocity in the world frame and the angular one in the body frame.
+    double rot[9], linear_body[3];
+    mju_quat2Mat(rot, o.data() + 3);
+    mju_rotVecMatT(linear_body, o.data() + 7, rot);
+    auto& tw = odom_msg_.twist.twist;
+    tw.linear.x = linear_body[0], tw.linear.y = linear_body[1], tw.linear.z = linear_body[2];
+    tw.angular.x = o[10], tw.angular.y = o[11], tw.angular.z = o[12];
+    object_tf_.header = odom_msg_.header;
+    object_tf_.child_frame_id = odom_msg_.child_frame_id;
+    object_tf_.transform.translation.x = pose.position.x;
+    object_tf_.transform.translation.y = pose.position.y;
+    object_tf_.transform.translation.z = pose.position.z;
+    object_tf_.transform.rotation = pose.orientation;
+  }
+}
+
+}  // namespace adroit::driver

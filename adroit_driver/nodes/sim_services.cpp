@@ -1,0 +1,215 @@
+// Commands and services. The safety path (commands, e-stop input and service, release,
+// pause) runs on its own queue and thread; /step, /reset and /set_object_pose run on the
+// default queue and never hold the robot while they wait.
+#include <chrono>
+
+#include "sim_driver.h"
+
+namespace adroit::driver {
+
+// ---------------------------------------------------------------------------- commands (safety queue)
+
+void SimDriver::reportCommand(const char* topic, const CommandResult& result) {
+  if (result.applied) return;
+  const bool valid = result.verdict == CommandVerdict::kAccepted || result.verdict == CommandVerdict::kClamped;
+  if (!valid) {
+    ROS_ERROR_THROTTLE(1.0, "adroit_sim: %s rejected: %s", topic, result.error.c_str());
+    return;
+  }
+  // A valid command while the safe state holds is expected (the senders keep running until
+  // release; at shutdown their last commands land here): said once per safe-state episode.
+  if (!warned_ignored_while_safe_.exchange(true))
+    ROS_WARN("adroit_sim: %s and further commands ignored until /adroit/estop_release: %s", topic,
+             result.error.c_str());
+}
+
+void SimDriver::onValveCommand(const adroit_msgs::ValveCommand::ConstPtr& msg) {
+  // Addressing and values are checked before the robot is locked; under the lock only the
+  // checked values are copied in.
+  const CheckedCommand checked = robot_->checkValves(msg->name, msg->index, msg->volts);
+  CommandResult result;
+  {
+    std::lock_guard<std::mutex> lock(robot_mutex_);
+    result = robot_->applyValves(checked);
+  }
+  reportCommand("valve_command", result);
+}
+
+void SimDriver::onForceCommand(const adroit_msgs::TendonForceCommand::ConstPtr& msg) {
+  const CheckedCommand checked = robot_->checkForces(msg->name, msg->index, msg->force);
+  CommandResult result;
+  {
+    std::lock_guard<std::mutex> lock(robot_mutex_);
+    result = robot_->applyForces(checked);
+  }
+  reportCommand("tendon_force_command", result);
+}
+
+void SimDriver::cancelSteps(const char* why) {
+  std::lock_guard<std::mutex> lock(control_mutex_);
+  if (pending_steps_ == 0) return;
+  pending_steps_ = 0;
+  step_interruption_ = why;
+  ++step_cancellations_;
+  control_cv_.notify_all();
+}
+
+void SimDriver::onEstopInput(const std_msgs::Bool::ConstPtr& msg) {
+  bool pressed;
+  {
+    std::lock_guard<std::mutex> lock(robot_mutex_);
+    pressed = msg->data && !robot_->safety().estop_input;
+    if (msg->data != robot_->safety().estop_input) ++estop_input_changes_;
+    robot_->setEstopInput(msg->data);
+  }
+  if (pressed) {
+    cancelSteps("cancelled by the e-stop input");
+    // A bouncing contact toggles at kHz: one line a second, with the count.
+    ROS_WARN_THROTTLE(1.0, "adroit_sim: e-stop input held: safe state (%lu input changes so far)",
+                      static_cast<unsigned long>(estop_input_changes_.load()));
+  }
+  publishSafeStateIfChanged();
+}
+
+bool SimDriver::onEstop(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
+  double clock;
+  {
+    std::lock_guard<std::mutex> lock(robot_mutex_);
+    robot_->estop();
+    clock = robot_->clock();
+  }
+  cancelSteps("cancelled by /adroit/estop");
+  ROS_WARN_THROTTLE(1.0, "adroit_sim: e-stop: supply exhausted, every valve open to exhaust (latched)");
+  publishSafeStateIfChanged();
+  res.success = true;
+  res.message = "e-stop latched at simulated time " + std::to_string(clock) + " s";
+  return true;
+}
+
+bool SimDriver::onRelease(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
+  {
+    std::lock_guard<std::mutex> lock(robot_mutex_);
+    res.success = robot_->release(&res.message);
+  }
+  if (res.success) {
+    warned_ignored_while_safe_ = false;
+    released_wall_ = wallSeconds();
+    ROS_INFO("adroit_sim: safe state %s", res.message.c_str());
+  } else {
+    ROS_WARN("adroit_sim: release %s", res.message.c_str());
+  }
+  publishSafeStateIfChanged();
+  return true;
+}
+
+bool SimDriver::onPause(std_srvs::SetBool::Request& req, std_srvs::SetBool::Response& res) {
+  std::lock_guard<std::mutex> lock(control_mutex_);
+  paused_ = req.data;
+  if (pending_steps_ > 0) {  // a running /step ends here, unsuccessful
+    pending_steps_ = 0;
+    step_interruption_ = req.data ? "cancelled by /adroit/pause" : "cancelled: the simulation was resumed";
+    ++step_cancellations_;
+  }
+  control_cv_.notify_all();
+  res.success = true;
+  res.message = paused_ ? "paused" : "running";
+  return true;
+}
+
+// ---------------------------------------------------------------------------- services (default queue)
+
+bool SimDriver::onStep(adroit_msgs::Step::Request& req, adroit_msgs::Step::Response& res) {
+  std::unique_lock<std::mutex> lock(control_mutex_);
+  if (!paused_) {
+    res.success = false;
+    res.message = "the simulation is running; pause it (/adroit/pause) before stepping";
+  } else if (req.steps > kMaxStepsPerRequest) {
+    res.success = false;
+    res.message = "at most " + std::to_string(kMaxStepsPerRequest) + " steps per request, asked for " +
+                  std::to_string(req.steps);
+  } else if (req.steps > 0) {
+    const std::uint64_t cancellations = step_cancellations_;
+    pending_steps_ += req.steps;
+    control_cv_.notify_all();
+    // The wait ends when the steps are done, cancelled (pause, e-stop) or the driver stops;
+    // the budget (100x slower than real time) only guards against a stalled simulation.
+    const double budget = 10.0 + req.steps * params_.sim.timestep * 100.0;
+    const bool ended = control_cv_.wait_for(lock, std::chrono::duration<double>(budget), [&] {
+      return pending_steps_ == 0 || !running_ || step_cancellations_ != cancellations;
+    });
+    const bool cancelled = step_cancellations_ != cancellations;
+    res.success = ended && !cancelled && pending_steps_ == 0 && running_;
+    res.message = res.success ? "stepped"
+                  : cancelled ? "stepping " + step_interruption_
+                  : !running_ ? "stepping interrupted: the driver is stopping"
+                              : "stepping timed out";
+  } else {
+    res.success = true;
+    res.message = "nothing to do";
+  }
+  lock.unlock();
+  // Answer once the stepped states are out, so a caller sees them before the reply.
+  waitForPublication(queuedBatches());
+  std::lock_guard<std::mutex> robot_lock(robot_mutex_);
+  res.sim_time = robot_->clock();
+  return true;
+}
+
+bool SimDriver::changeState(const std::function<bool(std::string*)>& change, std::string* error) {
+  std::unique_lock<std::mutex> lock(control_mutex_);
+  control_cv_.wait(lock, [this] { return !pending_change_ || !running_; });  // one change at a time
+  if (!running_) return *error = "the driver is stopping", false;
+  pending_change_ = &change;
+  change_done_ = false;
+  control_cv_.notify_all();
+  // No time-out: the simulation thread runs the change between two steps (microseconds to
+  // a millisecond), and `change` must outlive its use there.
+  control_cv_.wait(lock, [this] { return change_done_ || (!running_ && !change_running_); });
+  const bool ok = change_done_ && change_ok_;
+  *error = change_done_ ? change_error_ : "the driver is stopping";
+  const std::uint64_t published = change_published_;
+  pending_change_ = nullptr;
+  change_done_ = false;
+  control_cv_.notify_all();
+  lock.unlock();
+  // A caller never receives a pre-change message after the answer.
+  if (ok) waitForPublication(published);
+  return ok;
+}
+
+bool SimDriver::onReset(adroit_msgs::Reset::Request& req, adroit_msgs::Reset::Response& res) {
+  const bool arrays = !req.qpos.empty() || !req.qvel.empty() || !req.pressure.empty();
+  if (!req.keyframe.empty() && arrays) {
+    res.success = false;
+    res.message = "give either a keyframe or state arrays, not both";
+    return true;
+  }
+  std::string error;
+  res.success = changeState(
+      [&](std::string* why) {
+        return arrays ? robot_->resetToState(req.qpos, req.qvel, req.pressure, why)
+                      : robot_->resetToKeyframe(req.keyframe, why);
+      },
+      &error);
+  res.message = res.success ? "reset" : error;
+  if (!res.success) ROS_WARN("adroit_sim: reset refused: %s", error.c_str());
+  return true;
+}
+
+bool SimDriver::onSetObjectPose(adroit_msgs::SetObjectPose::Request& req, adroit_msgs::SetObjectPose::Response& res) {
+  const auto& p = req.pose.position;
+  const auto& q = req.pose.orientation;
+  const auto& l = req.twist.linear;
+  const auto& a = req.twist.angular;
+  std::string error;
+  res.success = changeState(
+      [&](std::string* why) {
+        return robot_->setObjectPose({p.x, p.y, p.z}, {q.w, q.x, q.y, q.z}, {l.x, l.y, l.z}, {a.x, a.y, a.z}, why);
+      },
+      &error);
+  res.message = res.success ? "object placed" : error;
+  if (!res.success) ROS_WARN("adroit_sim: set_object_pose refused: %s", error.c_str());
+  return true;
+}
+
+}  // namespace adroit::driver

@@ -21,5 +21,6 @@ run rosrun adroit_core noise_bench
 run rosrun adroit_description scene_report --testspeed --seconds 10
 run rosrun adroit_pneumatics pneumatics_bench
 run rosrun adroit_driver run_bench.sh ball 5 10
+run bash "$WS_ROOT/launch/bench/watchdog_under_load.sh" 60
 echo "== summary =="
 grep '^RESULT' "$WS_ROOT/log/bench/all.txt"

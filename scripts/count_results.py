@@ -1,6 +1,9 @@
 #!/usr/bin/python3
 """Counts the test cases of a `colcon test` run from the JUnit files under build/.
 
+Several build directories may be named (test.sh: build/ and the sanitizer tree build-asan/);
+their cases are counted together.
+
 Prints each failing case and a final line 'N passed, N failed'. Exit 1 if anything failed
 or no test ran at all. Every way a test can go wrong is counted as a failure:
 
@@ -139,10 +142,14 @@ def count_package(count, package_build_dir):
             count.fail(f"{package_build_dir}: ctest test {stem} exited non-zero although its results passed")
 
 
-def main(build_dir, failed_commands=()):
+def main(build_dirs, failed_commands=()):
+    """build_dirs: one build directory or a list of them."""
+    if isinstance(build_dirs, str):
+        build_dirs = [build_dirs]
     count = Count()
-    for package_build_dir in sorted(glob.glob(f"{build_dir}/*/")):
-        count_package(count, package_build_dir.rstrip("/"))
+    for build_dir in build_dirs:
+        for package_build_dir in sorted(glob.glob(f"{build_dir}/*/")):
+            count_package(count, package_build_dir.rstrip("/"))
     if count.failed == 0:
         # A runner that failed without any failing result left a failure we cannot see.
         for command in failed_commands:
@@ -158,8 +165,9 @@ def main(build_dir, failed_commands=()):
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("build_dir", nargs="?", default="build")
+    parser.add_argument("build_dirs", nargs="*", default=["build"], metavar="build_dir",
+                        help="colcon build directories (default: build)")
     parser.add_argument("--failed-command", action="append", default=[],
                         help="a test runner that exited non-zero (counted if no result shows why)")
     args = parser.parse_args()
-    sys.exit(main(args.build_dir, args.failed_command))
+    sys.exit(main(args.build_dirs, args.failed_command))

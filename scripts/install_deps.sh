@@ -27,8 +27,11 @@ PACKAGES=(
   libmujoco-dev libmujoco-samples libqhull-dev
   # numerics, config, testing, benchmarks
   libeigen3-dev libyaml-cpp-dev libgtest-dev libgmock-dev libbenchmark-dev python3-numpy
-  # the workspace's own test of its result counting
-  python3-pytest
+  # the workspace's own tests: its result counting; readelf for the check that no core
+  # library links a ROS library (scripts/test_core_links.py)
+  python3-pytest binutils
+  # generate_model.py reads the cylinder catalogue adroit_description/config/cylinders.yaml
+  python3-yaml
   # screenshots of rviz under a virtual display
   xvfb x11-apps imagemagick
 )

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # The README's test command: install, build, run every test (gtest units and rostest
-# integrations of the packages, the workspace scripts' own tests), end with one line
-# 'N passed, N failed' that counts every case, a crashed or timed-out rostest included;
-# exit non-zero on any failure.
+# integrations of the packages, the sanitizer build's gtests, the workspace scripts' own
+# tests), end with one line 'N passed, N failed' that counts every case, a crashed or
+# timed-out rostest included; exit non-zero on any failure.
 set -uo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 source "$here/env.sh"
@@ -22,13 +22,22 @@ failed_commands=()
 colcon --log-base log test --parallel-workers 1 --return-code-on-test-failure \
   --event-handlers console_cohesion+ summary+ "$@" || failed_commands+=("colcon test")
 
-# The workspace scripts' own tests (the result counting below), as one more result file,
-# through catkin's wrapper like every package test: no result file gives a MISSING failure.
-result="$WS_ROOT/build/workspace_scripts/test_results/workspace_scripts/pytest-test_count_results.xml"
-python3 /usr/share/catkin/cmake/test/run_tests.py --return-code "$result" \
-  "python3 -m pytest -q -p no:cacheprovider $here/test_count_results.py --junitxml=$result" \
-  || failed_commands+=("pytest scripts")
+# Sanitizer stage: the core libraries and their gtests again, built with ASan + UBSan (and
+# LSan) into build-asan/ and install-asan/ (scripts/test_sanitizers.sh).
+sanitizer_start=$SECONDS
+"$here/test_sanitizers.sh" || failed_commands+=("sanitizer stage")
+echo "sanitizer stage (ASan+UBSan build and gtests): $((SECONDS - sanitizer_start)) s wall time added"
+
+# The workspace scripts' own tests (the result counting below; that no core library links a
+# ROS library), one result file each, through catkin's wrapper like every package test: no
+# result file gives a MISSING failure.
+for t in test_count_results test_core_links; do
+  result="$WS_ROOT/build/workspace_scripts/test_results/workspace_scripts/pytest-$t.xml"
+  python3 /usr/share/catkin/cmake/test/run_tests.py --return-code "$result" \
+    "python3 -m pytest -q -p no:cacheprovider $here/$t.py --junitxml=$result" \
+    || failed_commands+=("pytest $t")
+done
 
 args=()
 for c in "${failed_commands[@]}"; do args+=(--failed-command "$c"); done
-python3 "$here/count_results.py" build "${args[@]}"
+python3 "$here/count_results.py" build build-asan "${args[@]}"

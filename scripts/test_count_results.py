@@ -134,3 +134,19 @@ def test_runner_that_failed_without_a_failing_result(tree, capsys):
     tree.write("gtest-test_z.xml", suite(case("Z", "broken", "fail")))
     assert count_results.main(str(tree.build), ["colcon test"]) == 1  # explained: not counted twice
     assert capsys.readouterr().out.strip().splitlines()[-1] == "1 passed, 1 failed"
+
+
+def test_several_build_directories_are_counted_together(tmp_path, capsys):
+    # test.sh counts build/ and the sanitizer tree build-asan/ in one line; the same package
+    # in both counts twice, and a failure in either fails the run.
+    main_tree = Tree(tmp_path / "main")
+    main_tree.write("gtest-test_x.xml", suite(case("X", "a"), case("X", "b")))
+    asan = Tree(tmp_path / "asan")
+    asan.write("gtest-test_x.xml", suite(case("X", "a"), case("X", "b", "fail")))
+    asan.ctest_failed("_ctest_pkg_gtest_test_x")
+    assert count_results.main([str(main_tree.build), str(asan.build)]) == 1
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[-1] == "3 passed, 1 failed"
+    assert lines[:-1] == [f"FAILED {asan.results}/gtest-test_x.xml: X.b"]
+    assert count_results.main([str(main_tree.build), str(tmp_path / "never_built")]) == 0
+    assert capsys.readouterr().out.strip().splitlines()[-1] == "2 passed, 0 failed"

@@ -64,7 +64,14 @@ class DemoMotion:
         msg.header.stamp = now
         msg.name = self.names
         msg.force = [desired_force(n, t, self.period) for n in self.names]
-        self.pub.publish(msg)
+        self.send(msg)
+
+    def send(self, msg):
+        try:
+            self.pub.publish(msg)
+        except rospy.ROSException:
+            if not rospy.is_shutdown():  # a timer tick racing the shutdown is not an error
+                raise
 
     def publish_reference(self, _event):
         if self.names is None:
@@ -77,7 +84,7 @@ class DemoMotion:
         msg.steps = 100
         msg.name = self.names
         msg.force = [desired_force(n, t0 + k * msg.dt, self.period) for k in range(msg.steps) for n in self.names]
-        self.pub.publish(msg)
+        self.send(msg)
 
 
 if __name__ == "__main__":

@@ -13,7 +13,7 @@ namespace adroit::driver {
 void SimDriver::publishSafeStateIfChanged() {
   bool safe;
   {
-    std::lock_guard<std::mutex> lock(robot_mutex_);
+    std::lock_guard<PiMutex> lock(robot_mutex_);
     safe = robot_->safety().safe_state;
   }
   // Called from the safety queue and, once, from the constructor: never concurrently.
@@ -30,7 +30,7 @@ void SimDriver::onSafetyMonitor(const ros::WallTimerEvent&) {
   SafetyEvents events;
   Counters counters;
   {
-    std::lock_guard<std::mutex> lock(robot_mutex_);  // plain data: no allocation under the lock
+    std::lock_guard<PiMutex> lock(robot_mutex_);  // plain data: no allocation under the lock
     events = robot_->safetyEvents();
     counters = robot_->counters();
   }
@@ -62,7 +62,7 @@ void SimDriver::onDiagnostics(const ros::WallTimerEvent&) {
   std::size_t never_commanded;
   std::string never_commanded_names;
   {
-    std::lock_guard<std::mutex> lock(robot_mutex_);
+    std::lock_guard<PiMutex> lock(robot_mutex_);
     safety = robot_->safety();
     counters = robot_->counters();
     clock = robot_->clock();

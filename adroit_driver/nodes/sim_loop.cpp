@@ -2,7 +2,7 @@
 // wall) or in lockstep (as fast as possible, or a requested number of steps while paused),
 // and queues each step's outputs for the publisher thread. After start-up it allocates
 // nothing and logs nothing; the only lock it can meet held by another thread is
-// robot_mutex_, whose other holders copy a few numbers.
+// robot_mutex_ (priority inheritance), whose other holders copy a few numbers.
 #include <pthread.h>
 #include <sched.h>
 #include <sys/resource.h>
@@ -82,7 +82,7 @@ void SimDriver::runPendingRequest() {
   std::string error;
   bool ok;
   {
-    std::lock_guard<std::mutex> lock(robot_mutex_);
+    std::lock_guard<PiMutex> lock(robot_mutex_);
     ok = (*change)(&error);
   }
   std::uint64_t published = 0;
@@ -136,7 +136,7 @@ void SimDriver::loop() {
     const auto compute_start = SteadyClock::now();
     double clock_after;
     {
-      std::lock_guard<std::mutex> lock(robot_mutex_);
+      std::lock_guard<PiMutex> lock(robot_mutex_);
       if (resync) {
         origin = compute_start + std::chrono::duration_cast<SteadyClock::duration>(std::chrono::duration<double>(dt));
         origin_clock = robot_->clock();

@@ -22,7 +22,7 @@ void SimDriver::publishDue(bool all, double wall_now, bool flush) {
   // size, so the copies below allocate nothing.
   Batch& batch = ring_[slot_index % kRingSize];
   {
-    std::lock_guard<std::mutex> lock(robot_mutex_);
+    std::lock_guard<PiMutex> lock(robot_mutex_);
     const std::uint64_t k = robot_->counters().steps;
     // A faulted physics state may hold NaN: such a state is never published (the safe
     // state and the fault are reported through diagnostics and /adroit/safe_state).

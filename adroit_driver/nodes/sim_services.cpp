@@ -29,7 +29,7 @@ void SimDriver::onValveCommand(const adroit_msgs::ValveCommand::ConstPtr& msg) {
   const CheckedCommand checked = robot_->checkValves(msg->name, msg->index, msg->volts);
   CommandResult result;
   {
-    std::lock_guard<std::mutex> lock(robot_mutex_);
+    std::lock_guard<PiMutex> lock(robot_mutex_);
     result = robot_->applyValves(checked);
   }
   reportCommand("valve_command", result);
@@ -39,7 +39,7 @@ void SimDriver::onForceCommand(const adroit_msgs::TendonForceCommand::ConstPtr& 
   const CheckedCommand checked = robot_->checkForces(msg->name, msg->index, msg->force);
   CommandResult result;
   {
-    std::lock_guard<std::mutex> lock(robot_mutex_);
+    std::lock_guard<PiMutex> lock(robot_mutex_);
     result = robot_->applyForces(checked);
   }
   reportCommand("tendon_force_command", result);
@@ -57,7 +57,7 @@ void SimDriver::cancelSteps(const char* why) {
 void SimDriver::onEstopInput(const std_msgs::Bool::ConstPtr& msg) {
   bool pressed;
   {
-    std::lock_guard<std::mutex> lock(robot_mutex_);
+    std::lock_guard<PiMutex> lock(robot_mutex_);
     pressed = msg->data && !robot_->safety().estop_input;
     if (msg->data != robot_->safety().estop_input) ++estop_input_changes_;
     robot_->setEstopInput(msg->data);
@@ -74,7 +74,7 @@ void SimDriver::onEstopInput(const std_msgs::Bool::ConstPtr& msg) {
 bool SimDriver::onEstop(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
   double clock;
   {
-    std::lock_guard<std::mutex> lock(robot_mutex_);
+    std::lock_guard<PiMutex> lock(robot_mutex_);
     robot_->estop();
     clock = robot_->clock();
   }
@@ -88,7 +88,7 @@ bool SimDriver::onEstop(std_srvs::Trigger::Request&, std_srvs::Trigger::Response
 
 bool SimDriver::onRelease(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
   {
-    std::lock_guard<std::mutex> lock(robot_mutex_);
+    std::lock_guard<PiMutex> lock(robot_mutex_);
     res.success = robot_->release(&res.message);
   }
   if (res.success) {
@@ -150,7 +150,7 @@ bool SimDriver::onStep(adroit_msgs::Step::Request& req, adroit_msgs::Step::Respo
   lock.unlock();
   // Answer once the stepped states are out, so a caller sees them before the reply.
   waitForPublication(queuedBatches());
-  std::lock_guard<std::mutex> robot_lock(robot_mutex_);
+  std::lock_guard<PiMutex> robot_lock(robot_mutex_);
   res.sim_time = robot_->clock();
   return true;
 }

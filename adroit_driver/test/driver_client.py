@@ -113,5 +113,10 @@ class DriverClient:
         raise AssertionError("command %.2f V never applied" % volts)
 
     def diagnostics(self, timeout=5.0):
+        return self.diagnostics_status(timeout)[2]
+
+    def diagnostics_status(self, timeout=5.0):
+        """(level, message, key -> value) of the driver's next diagnostics."""
         msg = self.wait_new("diagnostics", self.counted("diagnostics"), timeout)
-        return {kv.key: kv.value for kv in msg.status[0].values}
+        status = msg.status[0]
+        return status.level, status.message, {kv.key: kv.value for kv in status.values}

@@ -12,6 +12,7 @@ import unittest
 import rospy
 import rostest
 from adroit_msgs.msg import TendonForceCommand, ValveCommand
+from diagnostic_msgs.msg import DiagnosticStatus
 
 from driver_client import DriverClient
 
@@ -122,6 +123,28 @@ class LockstepSafety(unittest.TestCase):
         self.assertEqual(d.diagnostics()["safe_state"], "true", "latched until released")
         self.assertTrue(d.release().success)
         d.command_and_confirm(1.5, N)
+
+    def test_never_commanded_cylinders_warn_after_the_grace_period(self):
+        """The watchdog only watches commanded cylinders: a pool that never started leaves
+        its cylinders unwatched, which diagnostics must say (grace 1 s in this test)."""
+        d = self.d
+        grace = float(rospy.get_param("/adroit_sim/never_commanded_grace"))
+        time.sleep(grace + 0.3)  # setUp released: no command since
+        level, message, values = d.diagnostics_status()
+        self.assertEqual(values["never_commanded"], str(N))
+        self.assertEqual(level, DiagnosticStatus.WARN, message)
+        self.assertIn("%d cylinders never commanded" % N, message)
+        # Half the cylinders commanded (one pool of two running): the other half is named.
+        d.valve_pub.publish(ValveCommand(index=list(range(N // 2)), volts=[0.0] * (N // 2)))
+        d.step(1)
+        level, message, values = d.diagnostics_status()
+        self.assertEqual(values["never_commanded"], str(N - N // 2))
+        self.assertIn("A_", values["never_commanded_names"])
+        self.assertEqual(level, DiagnosticStatus.WARN, message)
+        d.command_and_confirm(0.0, N)  # all of them: OK again
+        level, message, values = d.diagnostics_status()
+        self.assertEqual(values["never_commanded"], "0")
+        self.assertEqual(level, DiagnosticStatus.OK, message)
 
     def test_watchdog_trips_within_one_control_period_after_timeout(self):
         d = self.d

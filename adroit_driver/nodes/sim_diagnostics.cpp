@@ -120,6 +120,8 @@ void SimDriver::onDiagnostics(const ros::WallTimerEvent&) {
   s.add("thread_scheduling", fifo > 0    ? "SCHED_FIFO " + std::to_string(fifo)
                              : nice != 0 ? "normal, nice " + std::to_string(nice)
                                          : std::string("normal"));
+  const int publisher_fifo = publisher_fifo_priority_;
+  s.add("publisher_scheduling", publisher_fifo > 0 ? "SCHED_FIFO " + std::to_string(publisher_fifo) : std::string("normal"));
   s.add("schedule_resyncs", total_resyncs_);
   s.add("safe_state", safety.safe_state);
   s.add("estop_latched", safety.estop_latched);

@@ -233,6 +233,7 @@ class SimDriver {
   std::atomic<std::uint64_t> steps_done_{0};
   std::atomic<int> fifo_priority_{0};  // of the simulation thread now (0 = normal scheduling)
   std::atomic<int> thread_nice_{0};    // of the simulation thread now (lockstep)
+  std::atomic<int> publisher_fifo_priority_{0};  // of the publisher thread (real time), 0 = normal
   std::atomic<long> sim_thread_id_{0};
   std::thread thread_;
 

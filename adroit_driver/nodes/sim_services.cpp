@@ -60,10 +60,11 @@ void SimDriver::onEstopInput(const std_msgs::Bool::ConstPtr& msg) {
     std::lock_guard<PiMutex> lock(robot_mutex_);
     pressed = msg->data && !robot_->safety().estop_input;
     if (msg->data != robot_->safety().estop_input) ++estop_input_changes_;
+    // Cancelled under the robot lock: no step starts between the latch and the cancel.
+    if (pressed) cancelSteps("cancelled by the e-stop input");
     robot_->setEstopInput(msg->data);
   }
   if (pressed) {
-    cancelSteps("cancelled by the e-stop input");
     // A bouncing contact toggles at kHz: one line a second, with the count.
     ROS_WARN_THROTTLE(1.0, "adroit_sim: e-stop input held: safe state (%lu input changes so far)",
                       static_cast<unsigned long>(estop_input_changes_.load()));
@@ -75,10 +76,12 @@ bool SimDriver::onEstop(std_srvs::Trigger::Request&, std_srvs::Trigger::Response
   double clock;
   {
     std::lock_guard<PiMutex> lock(robot_mutex_);
+    // Cancelled under the robot lock: after the latch at most the step the simulation
+    // thread had already begun waiting for the lock runs.
+    cancelSteps("cancelled by /adroit/estop");
     robot_->estop();
     clock = robot_->clock();
   }
-  cancelSteps("cancelled by /adroit/estop");
   ROS_WARN_THROTTLE(1.0, "adroit_sim: e-stop: supply exhausted, every valve open to exhaust (latched)");
   publishSafeStateIfChanged();
   res.success = true;

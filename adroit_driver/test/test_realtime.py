@@ -76,6 +76,7 @@ class RealTime(unittest.TestCase):
         self.assertEqual(values["time_mode"], "realtime")
         if os.geteuid() == 0:
             self.assertEqual(values["thread_scheduling"], "SCHED_FIFO 20", str(values))
+            self.assertEqual(values["publisher_scheduling"], "SCHED_FIFO 19", str(values))
 
 
 if __name__ == "__main__":

@@ -68,13 +68,13 @@ void SimDriver::onDiagnostics(const ros::WallTimerEvent&) {
     clock = robot_->clock();
     physics_time = robot_->data()->time;
     never_commanded = robot_->neverCommanded();
+    for (std::size_t i = 0; i < commanded_snapshot_.size(); ++i) commanded_snapshot_[i] = robot_->everCommanded(i);
   }
-  // Names from the model (constant); whether commanded is a snapshot, good enough for a list.
-  if (never_commanded > 0) {
+  if (never_commanded > 0) {  // names from the model (constant), built outside the lock
     const auto& names = robot_->cylinderNames();
     std::size_t listed = 0;
     for (std::size_t i = 0; i < names.size() && listed < 8; ++i) {
-      if (robot_->everCommanded(i)) continue;
+      if (commanded_snapshot_[i]) continue;
       never_commanded_names += (listed++ ? " " : "") + names[i];
     }
     if (never_commanded > listed) never_commanded_names += " ...";

@@ -28,6 +28,7 @@ SimDriver::SimDriver(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh), io_(nh,
   // Everything the threads reuse is sized here, once.
   marker_data_ = copyData(robot_->model(), robot_->data());
   marker_truth_ = robot_->truth();
+  commanded_snapshot_.assign(robot_->cylinders().size(), 0);
   for (StepTiming* t : {&timing_, &timing_spare_}) {
     t->step_time.reserve(kTimingCapacity);
     t->lateness.reserve(kTimingCapacity);

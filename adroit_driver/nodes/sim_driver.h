@@ -280,6 +280,7 @@ class SimDriver {
   std::mutex stats_mutex_;
   StepTiming timing_, timing_spare_;
   std::uint64_t total_misses_ = 0, total_resyncs_ = 0;  // diagnostics thread
+  std::vector<char> commanded_snapshot_;  // diagnostics thread: per cylinder, copied under the robot lock
   double window_wall_ = -1, window_clock_ = 0;
   std::uint64_t window_steps_ = 0;
   // Benchmark only (publisher thread), off unless asked for.

@@ -110,14 +110,8 @@ def count_package(count, package_build_dir):
                 claimed.add(inner)
             if inner_cases is None:
                 # The test node wrote nothing usable: the wrapper's verdict is the only one.
-                if outcome == "fail":
-                    why = "no result from the test node (crashed, timed out or never started)"
-                    count.fail(f"{wrapper}: {name}: {why}")
-                    wrapper_failed = True
-                elif outcome == "skip":
-                    count.skipped += 1
-                else:
-                    count.passed += 1
+                why = "no result from the test node (crashed, timed out or never started)"
+                wrapper_failed |= add_cases(count, wrapper, [(f"{name}: {why}", outcome)])
                 continue
             inner_failed = add_cases(count, inner, inner_cases)
             wrapper_failed |= inner_failed

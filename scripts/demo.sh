@@ -6,7 +6,8 @@
 # bringup is ended cleanly (driver paused first, so no safety event is raised by the pools
 # going down before it). Exit status: demo_report's (non-zero if nothing moved).
 # Extra arguments go to roslaunch, e.g. `bash scripts/demo.sh rviz:=true scene:=keypad`;
-# `duration:=60` sets the report window.
+# `duration:=60` sets the report window. Afterwards it renders an image strip of the run
+# offscreen with MuJoCo (render_states under xvfb-run) into log/demo/demo_strip.png.
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 source "$here/env.sh"
@@ -40,12 +41,33 @@ stop_launch() {
 }
 trap stop_launch EXIT
 for _ in $(seq 150); do rosparam get /rosversion >/dev/null 2>&1 && break; sleep 0.2; done
+out_dir="$WS_ROOT/log/demo"
+mkdir -p "$out_dir"
+rm -f "$out_dir"/states.csv "$out_dir"/frame_*.ppm
 set +e
-rosrun adroit_launch demo_report.py _duration:="$duration"
+scene="$(rosparam get /adroit_sim/scene 2>/dev/null)"
+rosrun adroit_launch demo_report.py _duration:="$duration" _states_csv:="$out_dir/states.csv"
 report_status=$?
 set -e
 # Pause first: a paused driver steps no watchdog, so the pools may go down in any order.
 rosservice call /adroit/pause true >/dev/null 2>&1 || true
 stop_launch
 trap - EXIT
+
+# Six frames over the recorded run, drawn offscreen (a hidden GLFW window on a virtual display).
+if [ -s "$out_dir/states.csv" ] && [ -n "$scene" ]; then
+  last="$(tail -n 1 "$out_dir/states.csv" | cut -d, -f1)"
+  times="$(python3 -c "print(','.join(f'{$last * k / 5:.2f}' for k in range(6)))")"
+  model="$(rospack find adroit_description)/mjcf/$scene.xml"
+  if xvfb-run -a rosrun adroit_description render_states --model "$model" --states "$out_dir/states.csv" \
+       --times "$times" --out "$out_dir/frame"; then
+    frames=()
+    k=0
+    for t in ${times//,/ }; do frames+=("$t:$(printf '%s/frame_%03d.ppm' "$out_dir" "$k")"); k=$((k + 1)); done
+    rosrun adroit_launch image_strip.py "$out_dir/demo_strip.png" \
+      "ADROIT demo ($scene scene)" "${frames[@]}" || echo "demo: image strip not written" >&2
+  else
+    echo "demo: offscreen rendering failed; no image strip" >&2
+  fi
+fi
 exit "$report_status"

@@ -14,6 +14,10 @@ PACKAGES=(
   ros-core-dev ros-desktop-dev librosbag-dev libtf2-ros-dev librostest-dev
   ros-robot-state-publisher librobot-state-publisher-dev joint-state-publisher
   joint-state-publisher-gui libnodeletlib-dev libnodelet-dev libnodeletlib-tools rviz
+  # behaviour MPC node: dynamic_reconfigure (C++ server; its .cfg generator is Python, run
+  # at build time), interactive goal marker, rviz markers
+  libdynamic-reconfigure-config-init-mutex-dev python3-dynamic-reconfigure
+  libinteractive-markers-dev libvisualization-msgs-dev
   # ROS command-line programs the scripts, tests and README call by name
   rosbash python3-roslaunch python3-rosparam python3-rostopic python3-rosservice python3-rosnode
   # Python modules imported by the rostests and the Python nodes (ros-desktop-dev brings
@@ -32,8 +36,9 @@ PACKAGES=(
   python3-pytest binutils
   # generate_model.py reads the cylinder catalogue adroit_description/config/cylinders.yaml
   python3-yaml
-  # screenshots of rviz under a virtual display
-  xvfb x11-apps imagemagick
+  # screenshots of rviz under a virtual display; offscreen MuJoCo frames (render_states: a
+  # hidden GLFW window under xvfb-run, which needs xauth); plots and image strips
+  xvfb xauth x11-apps imagemagick libglfw3-dev python3-matplotlib
 )
 
 SUDO=""

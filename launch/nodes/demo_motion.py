@@ -70,7 +70,9 @@ class DemoMotion:
         try:
             self.pub.publish(msg)
         except rospy.ROSException:
-            if not rospy.is_shutdown():  # a timer tick racing the shutdown is not an error
+            # A timer tick racing the shutdown is not an error: the topic closes as soon as the
+            # shutdown is requested, before is_shutdown() turns true.
+            if not (rospy.is_shutdown() or rospy.core.is_shutdown_requested()):
                 raise
 
     def publish_reference(self, _event):

@@ -2,7 +2,9 @@
 """Watches the running system for ~duration seconds, then prints what it did and exits:
 joint range of motion per finger, force tracking of the pneumatic pools (desired tension
 from /adroit/force_reference against the measured tension in /adroit/actuator_states), and
-the driver's own diagnostics (real-time factor, step time, safety state)."""
+the driver's own diagnostics (real-time factor, step time, safety state). With ~states_csv it
+also records the robot and object state at ~states_rate Hz into a CSV that render_states draws
+(columns: time, 1-DOF joint names, object_root:x|y|z|qw|qx|qy|qz)."""
 import math
 import sys
 from collections import defaultdict
@@ -10,7 +12,10 @@ from collections import defaultdict
 import rospy
 from adroit_msgs.msg import ActuatorStates, ForceReference
 from diagnostic_msgs.msg import DiagnosticArray
+from nav_msgs.msg import Odometry
 from sensor_msgs.msg import JointState
+
+OBJECT_COLUMNS = ["object_root:" + f for f in ("x", "y", "z", "qw", "qx", "qy", "qz")]
 
 
 class DemoReport:
@@ -23,6 +28,10 @@ class DemoReport:
         self.samples = defaultdict(int)
         self.driver_status = {}
         self.start = None
+        self.states_csv = rospy.get_param("~states_csv", "")
+        self.states_period = 1.0 / float(rospy.get_param("~states_rate", 20.0))
+        self.state_rows, self.state_names, self.object_pose, self.last_row = [], None, None, None
+        rospy.Subscriber("/adroit/object/odom", Odometry, self.on_object, queue_size=10)
         rospy.Subscriber("/adroit/joint_states", JointState, self.on_joints, queue_size=50)
         rospy.Subscriber("/adroit/force_reference", ForceReference, self.on_reference, queue_size=5)
         rospy.Subscriber("/adroit/actuator_states", ActuatorStates, self.on_actuators, queue_size=50)
@@ -33,7 +42,37 @@ class DemoReport:
             self.start = stamp
         return (stamp - self.start).to_sec() >= self.settle
 
+    def on_object(self, msg):
+        p, q = msg.pose.pose.position, msg.pose.pose.orientation
+        self.object_pose = [p.x, p.y, p.z, q.w, q.x, q.y, q.z]
+
+    def record_state(self, msg):
+        stamp = msg.header.stamp.to_sec()
+        if self.last_row is not None and stamp - self.last_row < self.states_period:
+            return
+        if self.state_names is None:
+            self.state_names = list(msg.name)
+        if list(msg.name) != self.state_names:
+            return  # a different joint set: not the robot this recording started with
+        self.last_row = stamp
+        self.state_rows.append([stamp] + list(msg.position) + (self.object_pose or []))
+
+    def write_states(self):
+        if not self.states_csv or not self.state_rows:
+            return
+        width = max(len(row) for row in self.state_rows)
+        header = ["time"] + self.state_names + (OBJECT_COLUMNS if width > len(self.state_names) + 1 else [])
+        t0 = self.state_rows[0][0]
+        with open(self.states_csv, "w") as f:
+            f.write(",".join(header) + "\n")
+            for row in self.state_rows:
+                if len(row) == len(header):  # rows before the first object pose lack it
+                    f.write(",".join([f"{row[0] - t0:.4f}"] + [repr(v) for v in row[1:]]) + "\n")
+        print(f"states recorded for the image strip: {self.states_csv}")
+
     def on_joints(self, msg):
+        if self.states_csv:
+            self.record_state(msg)
         if not self.measuring(msg.header.stamp):
             return
         for name, q in zip(msg.name, msg.position):
@@ -107,5 +146,6 @@ if __name__ == "__main__":
         sys.exit(2)
     rospy.sleep(node.duration)
     moved = node.report()
+    node.write_states()
     rospy.signal_shutdown("demo finished")
     sys.exit(0 if moved > 0 else 1)

@@ -1,0 +1,335 @@
+// Behaviour MPC timing on the bottle catch scene (thesis table 6.2) and contact pruning
+// (thesis 6.4.3). A program, not a test: run it on an idle machine.
+//
+//   mpc_timing [--iterations N] [--quick]
+//
+// 1. Cost of one step and of one finite-difference knot on the planning model, sensors on/off.
+// 2. iLQG (and predictive sampling in the same run) in closed loop on the bottle drop:
+//    the simulation (bottle.xml, 2 ms) runs the policy for one control period between two
+//    optimisations; per-phase time split, median and p90.
+// 3. Design choices: iLQG total for planner dt, derivative_skip and worker count.
+// 4. Active contacts per step, before and after pruning, over a falling-bottle rollout.
+// 5. What a cheaper planning model (fixed tendons with constant moment arms instead of the
+//    wrapped spatial tendons) would give: step and FD time, built in memory from the XML.
+// Ends with RESULT lines (DESIGN.md §5).
+#include <adroit_core/mujoco_model.h>
+#include <adroit_core/model_tables.h>
+#include <adroit_core/timing_stats.h>
+#include <adroit_description/scenes.h>
+#include <adroit_mpc/ilqg_planner.h>
+#include <adroit_mpc/planning_model.h>
+#include <adroit_mpc/sampling_planner.h>
+#include <adroit_mpc/task.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <ctime>
+#include <fstream>
+#include <regex>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+using namespace adroit_mpc;
+
+namespace {
+
+// CPU time of the whole process (every thread), s: independent of how many cores other
+// programs leave us, so it shows what an idle machine would give (CPU / cores, roughly).
+double processCpuSeconds() {
+  timespec ts;
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+struct Series {
+  std::vector<double> rollout, derivatives, cost, backward, line_search, total, cpu;
+  void add(const OptimizeReport& r, double cpu_seconds) {
+    cpu.push_back(cpu_seconds);
+    rollout.push_back(r.rollout);
+    derivatives.push_back(r.derivatives);
+    cost.push_back(r.cost);
+    backward.push_back(r.backward);
+    line_search.push_back(r.line_search);
+    total.push_back(r.total);
+  }
+};
+
+double ms(const std::vector<double>& v, double p) { return 1e3 * adroit::percentile(v, p); }
+
+struct RunResult {
+  Series series;
+  double final_error = 0, min_object_z = 0;
+  int diverged = 0;
+};
+
+struct Scene {
+  std::string share, planning_file, sim_file;
+};
+
+// Closed loop: plan from the simulation's state, run the policy for `period`, repeat.
+RunResult runClosedLoop(const Scene& scene, const std::string& planner_name, PlannerSettings settings,
+                        bool disable_sensors, int iterations, double period) {
+  PlanningModelSettings ms_settings;
+  ms_settings.timestep = settings.dt;
+  ms_settings.disable_sensors = disable_sensors;
+  auto model = loadPlanningModel(scene.planning_file, ms_settings);
+  auto sim_model = adroit::loadModelFile(scene.sim_file).model;
+  adroit::DataPtr sim = adroit::makeData(sim_model.get());
+  const int rest = mj_name2id(sim_model.get(), mjOBJ_KEY, "rest");
+  if (rest >= 0) mj_resetDataKeyframe(sim_model.get(), sim.get(), rest);
+  mj_forward(sim_model.get(), sim.get());
+
+  auto task = makeTask("catch", {});
+  task->bind(model.get(), settings.synergies ? Synergies::kCount : 0);  // for error() on the simulation
+  auto planner = makePlanner(planner_name);
+  planner->initialize(model.get(), *task, settings);
+  PlanPolicy policy;
+  PlannerState state;
+  RunResult result;
+  const int object_body = mj_name2id(sim_model.get(), mjOBJ_BODY, "object");
+  result.min_object_z = 1e9;
+  const int steps = static_cast<int>(std::lround(period / sim_model->opt.timestep));
+  for (int i = 0; i < iterations; ++i) {
+    state.time = sim->time;
+    state.qpos.assign(sim->qpos, sim->qpos + sim_model->nq);
+    state.qvel.assign(sim->qvel, sim->qvel + sim_model->nv);
+    state.act.assign(sim->act, sim->act + sim_model->na);
+    planner->setState(state);
+    const double cpu_start = processCpuSeconds();
+    OptimizeReport r = planner->optimize();
+    const double cpu = processCpuSeconds() - cpu_start;
+    if (r.diverged) ++result.diverged;
+    if (i > 0) result.series.add(r, cpu);  // the first call warms caches and sizes
+    planner->policy(policy);
+    for (int k = 0; k < steps; ++k) {
+      policy.action(sim->time, sim->qpos, sim->qvel, sim->act, sim->ctrl);
+      mj_step(sim_model.get(), sim.get());
+    }
+    result.min_object_z = std::min(result.min_object_z, sim->xpos[3 * object_body + 2]);
+  }
+  result.final_error = task->error(sim_model.get(), sim.get());
+  return result;
+}
+
+// Mean time of one mj_step and one mjd_transitionFD (forward differences) on one core.
+void stepAndFdTime(const mjModel* m, double& step_us, double& fd_ms) {
+  adroit::DataPtr d = adroit::makeData(m);
+  const int rest = mj_name2id(m, mjOBJ_KEY, "rest");
+  if (rest >= 0) mj_resetDataKeyframe(m, d.get(), rest);
+  for (int i = 0; i < 60; ++i) mj_step(m, d.get());  // bottle on its way down
+  adroit::DataPtr probe = adroit::copyData(m, d.get());
+  adroit::Stopwatch clock;
+  const int n_steps = 500;
+  for (int i = 0; i < n_steps; ++i) mj_step(m, probe.get());
+  step_us = 1e6 * clock.elapsed() / n_steps;
+  const int nx = 2 * m->nv + m->na;
+  std::vector<double> A(nx * nx), B(nx * m->nu);
+  clock.restart();
+  const int n_fd = 20;
+  for (int i = 0; i < n_fd; ++i) mjd_transitionFD(m, d.get(), 1e-6, 0, A.data(), B.data(), nullptr, nullptr);
+  fd_ms = 1e3 * clock.elapsed() / n_fd;
+}
+
+// Mean and max active contacts per step over a falling-bottle rollout at zero tension,
+// counted from the first contact of the bottle on.
+void contactStats(const mjModel* m, double seconds, double& mean, int& max) {
+  adroit::DataPtr d = adroit::makeData(m);
+  const int rest = mj_name2id(m, mjOBJ_KEY, "rest");
+  if (rest >= 0) mj_resetDataKeyframe(m, d.get(), rest);
+  double sum = 0;
+  int count = 0;
+  max = 0;
+  while (d->time < seconds) {
+    mj_step(m, d.get());
+    const int n = activeContacts(d.get());
+    sum += n;
+    ++count;
+    max = std::max(max, n);
+  }
+  mean = sum / count;
+}
+
+// The planning XML with every spatial tendon replaced by a fixed tendon whose joint
+// coefficients are the spatial tendon's moment arms at the rest pose (constant).
+std::string fixedTendonXml(const std::string& xml, const mjModel* m) {
+  adroit::DataPtr d = adroit::makeData(m);
+  const int rest = mj_name2id(m, mjOBJ_KEY, "rest");
+  if (rest >= 0) mj_resetDataKeyframe(m, d.get(), rest);
+  mj_forward(m, d.get());
+  std::regex spatial(R"re(<spatial name="([^"]+)"[^>]*>.*?</spatial>)re");
+  std::smatch match;
+  std::ostringstream built;
+  auto begin = xml.cbegin();
+  while (std::regex_search(begin, xml.cend(), match, spatial)) {
+    built << std::string(begin, match[0].first);
+    const std::string name = match[1];
+    const int t = mj_name2id(m, mjOBJ_TENDON, name.c_str());
+    built << "<fixed name=\"" << name << "\">";
+    std::vector<double> moment(m->nv, 0.0);  // dense row of the tendon Jacobian
+    if (mj_isSparse(m)) {
+      for (int k = 0; k < d->ten_J_rownnz[t]; ++k)
+        moment[d->ten_J_colind[d->ten_J_rowadr[t] + k]] = d->ten_J[d->ten_J_rowadr[t] + k];
+    } else {
+      for (int v = 0; v < m->nv; ++v) moment[v] = d->ten_J[t * m->nv + v];
+    }
+    for (int j = 0; j < m->njnt; ++j) {
+      if (m->jnt_type[j] != mjJNT_HINGE && m->jnt_type[j] != mjJNT_SLIDE) continue;
+      const double arm = moment[m->jnt_dofadr[j]];
+      if (std::fabs(arm) > 1e-9)
+        built << "<joint joint=\"" << mj_id2name(m, mjOBJ_JOINT, j) << "\" coef=\"" << arm << "\"/>";
+    }
+    built << "</fixed>";
+    begin = match[0].second;
+  }
+  built << std::string(begin, xml.cend());
+  return built.str();
+}
+
+std::string readFile(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int iterations = 50;
+  bool quick = false;
+  // Defaults as config/mpc.yaml.
+  double dt = 0.01;
+  int skip = 2;
+  for (int i = 1; i < argc; ++i) {
+    if (!std::strcmp(argv[i], "--iterations") && i + 1 < argc) iterations = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--dt") && i + 1 < argc) dt = std::atof(argv[++i]);
+    else if (!std::strcmp(argv[i], "--skip") && i + 1 < argc) skip = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--quick")) quick = true;
+    else {
+      std::fprintf(stderr, "usage: mpc_timing [--iterations N] [--dt S] [--skip K] [--quick]\n");
+      return 2;
+    }
+  }
+  try {
+    Scene scene;
+    scene.share = descriptionShareDir();
+    scene.planning_file = adroit::description::sceneFile(scene.share, "bottle", true);
+    scene.sim_file = adroit::description::sceneFile(scene.share, "bottle", false);
+    const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
+    double load[1] = {0};
+    if (getloadavg(load, 1) < 1) load[0] = -1;
+    std::printf("MPC timing, bottle catch scene, %u cores, horizon 0.3 s, load average %.1f%s\n\n", cores, load[0],
+                load[0] > 0.5 ? " (NOT idle: wall times are inflated, see the CPU rows)" : "");
+
+    // 1. Step and FD knot cost.
+    std::printf("Planning model cost per knot (one core)\n");
+    std::printf("%-44s %10s %12s\n", "model", "step [us]", "FD knot [ms]");
+    for (double knot_dt : {0.002, 0.005, 0.01}) {
+      for (bool off : {false, true}) {
+        PlanningModelSettings s;
+        s.timestep = knot_dt;
+        s.disable_sensors = off;
+        auto m = loadPlanningModel(scene.planning_file, s);
+        double step_us, fd_ms;
+        stepAndFdTime(m.get(), step_us, fd_ms);
+        char label[64];
+        std::snprintf(label, sizeof label, "dt %.3f s, sensors %s, smooth contacts", knot_dt, off ? "off" : "on");
+        std::printf("%-44s %10.1f %12.2f\n", label, step_us, fd_ms);
+      }
+    }
+    {
+      PlanningModelSettings s;
+      s.timestep = 0.01;
+      s.solver_iterations = 5;
+      auto m = loadPlanningModel(scene.planning_file, s);
+      double step_us, fd_ms;
+      stepAndFdTime(m.get(), step_us, fd_ms);
+      std::printf("%-44s %10.1f %12.2f\n", "dt 0.010 s, sensors off, 5 solver iterations", step_us, fd_ms);
+    }
+    PlanningModelSettings base_settings;
+    base_settings.timestep = 0.005;
+    auto base = loadPlanningModel(scene.planning_file, base_settings);
+    auto fixed = adroit::loadModelString(fixedTendonXml(readFile(scene.planning_file), base.get())).model;
+    applyPlanningSettings(fixed.get(), base_settings);
+    double fixed_step_us, fixed_fd_ms;
+    stepAndFdTime(fixed.get(), fixed_step_us, fixed_fd_ms);
+    std::printf("%-44s %10.1f %12.2f\n", "dt 0.005 s, sensors off, FIXED tendons (what-if)", fixed_step_us, fixed_fd_ms);
+
+    // 2. Closed loop, chosen defaults (config/mpc.yaml).
+    PlannerSettings chosen;
+    chosen.horizon = 0.3;
+    chosen.dt = dt;
+    chosen.threads = 0;
+    chosen.synergies = true;
+    chosen.derivative_skip = skip;
+    chosen.samples = 16;
+    const double period = 0.02;
+    std::printf("\niLQG closed loop (%d iterations, control period %.0f ms, dt %.3f, skip %d, synergies)\n",
+                iterations, 1e3 * period, chosen.dt, chosen.derivative_skip);
+    RunResult ilqg = runClosedLoop(scene, "ilqg", chosen, true, iterations, period);
+    RunResult sampling = runClosedLoop(scene, "sampling", chosen, true, iterations, period);
+    std::printf("%-22s %10s %10s   %s\n", "phase [ms]", "median", "p90", "thesis table 6.2 (6 cores)");
+    const Series& s = ilqg.series;
+    std::printf("%-22s %10.2f %10.2f   %s\n", "rollout", ms(s.rollout, 50), ms(s.rollout, 90), "6");
+    std::printf("%-22s %10.2f %10.2f   %s\n", "derivatives", ms(s.derivatives, 50), ms(s.derivatives, 90), "36");
+    std::printf("%-22s %10.2f %10.2f   %s\n", "cost", ms(s.cost, 50), ms(s.cost, 90), "1");
+    std::printf("%-22s %10.2f %10.2f   %s\n", "backward pass", ms(s.backward, 50), ms(s.backward, 90), "10");
+    std::printf("%-22s %10.2f %10.2f   %s\n", "line search", ms(s.line_search, 50), ms(s.line_search, 90), "7");
+    std::printf("%-22s %10.2f %10.2f   %s\n", "total iLQG", ms(s.total, 50), ms(s.total, 90), "59");
+    std::printf("%-22s %10.2f %10.2f   (CPU time of all threads)\n", "CPU iLQG", ms(s.cpu, 50), ms(s.cpu, 90));
+    std::printf("%-22s %10.2f %10.2f   (%d samples)\n", "total pred. sampling", ms(sampling.series.total, 50),
+                ms(sampling.series.total, 90), chosen.samples);
+    std::printf("%-22s %10.2f %10.2f\n", "CPU pred. sampling", ms(sampling.series.cpu, 50), ms(sampling.series.cpu, 90));
+    std::printf("diverged iterations: iLQG %d, sampling %d; object distance to goal at the end: iLQG %.3f m, "
+                "sampling %.3f m\n", ilqg.diverged, sampling.diverged, ilqg.final_error, sampling.final_error);
+
+    // 3. Design choices.
+    if (!quick) {
+      std::printf("\niLQG total per iteration by setting (median / p90 ms, 15 iterations each)\n");
+      std::printf("%-8s %-6s %-8s %-9s %10s %10s %10s\n", "dt", "skip", "threads", "sensors", "median", "p90", "CPU med.");
+      struct Choice { double dt; int skip; int threads; bool sensors_off; };
+      const Choice choices[] = {{0.005, 1, 0, false}, {0.005, 1, 0, true}, {0.005, 4, 0, true}, {0.005, 6, 0, true},
+                                {0.01, 1, 0, true},    {0.01, 2, 0, false}, {0.01, 2, 1, true}, {0.01, 2, 0, true},
+                                {0.01, 3, 0, true}};
+      for (const Choice& c : choices) {
+        PlannerSettings p = chosen;
+        p.dt = c.dt;
+        p.derivative_skip = c.skip;
+        p.threads = c.threads;
+        RunResult r = runClosedLoop(scene, "ilqg", p, c.sensors_off, 16, period);
+        std::printf("%-8.3f %-6d %-8d %-9s %10.2f %10.2f %10.2f\n", c.dt, c.skip,
+                    c.threads ? c.threads : static_cast<int>(cores), c.sensors_off ? "off" : "on",
+                    ms(r.series.total, 50), ms(r.series.total, 90), ms(r.series.cpu, 50));
+      }
+    }
+
+    // 4. Contact pruning.
+    PlanningModelSettings contact_settings;
+    auto pruned = loadPlanningModel(scene.planning_file, contact_settings);
+    auto unpruned = loadUnprunedPlanningModel(scene.planning_file, contact_settings);
+    double mean_pruned, mean_unpruned, step_pruned, step_unpruned, fd_unused;
+    int max_pruned, max_unpruned;
+    contactStats(pruned.get(), 1.0, mean_pruned, max_pruned);
+    contactStats(unpruned.get(), 1.0, mean_unpruned, max_unpruned);
+    stepAndFdTime(pruned.get(), step_pruned, fd_unused);
+    stepAndFdTime(unpruned.get(), step_unpruned, fd_unused);
+    std::printf("\nActive contacts per step, falling bottle, 1 s, zero tension (thesis 6.4.3: 40 -> 20)\n");
+    std::printf("%-12s %8s %6s %10s\n", "model", "mean", "max", "step [us]");
+    std::printf("%-12s %8.1f %6d %10.1f\n", "unpruned", mean_unpruned, max_unpruned, step_unpruned);
+    std::printf("%-12s %8.1f %6d %10.1f\n", "pruned", mean_pruned, max_pruned, step_pruned);
+
+    const double median = ms(ilqg.series.total, 50);
+    std::printf("\nRESULT adroit_mpc/ilqg_iteration_ms %.1f ms target <= 50 %s\n", median, median <= 50 ? "PASS" : "FAIL");
+    std::printf("RESULT adroit_mpc/sampling_iteration_ms %.1f ms target <= 50 %s\n", ms(sampling.series.total, 50),
+                ms(sampling.series.total, 50) <= 50 ? "PASS" : "FAIL");
+    std::printf("RESULT adroit_mpc/active_contacts_pruned_ratio %.2f ratio target <= 0.7 %s\n",
+                mean_pruned / mean_unpruned, mean_pruned / mean_unpruned <= 0.7 ? "PASS" : "FAIL");
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "mpc_timing: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

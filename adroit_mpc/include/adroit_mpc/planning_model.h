@@ -1,0 +1,56 @@
+// The planning model of the behaviour MPC (thesis 6.4.3-6.4.4, table 6.3): the scene's
+// <scene>_planning.xml (table 6.1 springs and armature, pruned contacts) with the planner's
+// settings applied: timestep = planner dt, sensors off, smooth contacts, object overrides.
+#pragma once
+
+#include <adroit_core/mujoco_model.h>
+
+#include <mujoco/mujoco.h>
+
+#include <string>
+
+namespace adroit_mpc {
+
+struct PlanningModelSettings {
+  double timestep = 0.005;         // s; must equal PlannerSettings::dt
+  bool disable_sensors = true;     // the planner reads no sensor: mjDSBL_SENSOR
+  // Table 6.3 "mindist": contacts are generated this far before touching (geom and pair
+  // margin), so the optimiser sees them coming. 0 keeps the model's margins.
+  double contact_margin = 0.01;    // m (dynamic manipulation 0.01, typing 0.001)
+  // Table 6.3 "contact softness": the penetration over which the constraint stiffens
+  // (solimp width); solref's time constant is kept at least 2 timesteps (stable at dt).
+  double contact_softness = 0.005; // m (dynamic manipulation 0.005, typing 0.001); 0 keeps
+  // Constraint solver iterations per step (model: 20); fewer bound the cost of a step with
+  // many contacts (the warm start keeps them accurate along a trajectory). 0 keeps the model's.
+  int solver_iterations = 0;
+  double object_mass = 0;          // kg, body "object" (inertia scaled with it); 0 keeps
+  double object_size_scale = 1;    // geometric scale of the object's geoms (inertia ~ s^2)
+};
+
+// Applies the settings to a compiled model in place. Throws std::invalid_argument with one
+// line naming the bad setting (non-positive timestep, negative margin, object override on a
+// scene without a body "object").
+void applyPlanningSettings(mjModel* model, const PlanningModelSettings& settings);
+
+// Loads the planning MJCF and applies the settings. Throws adroit::ModelLoadError or
+// std::invalid_argument.
+adroit::ModelPtr loadPlanningModel(const std::string& path, const PlanningModelSettings& settings);
+
+// The same scene without contact pruning: every hand geom collides with every other
+// non-adjacent geom (MuJoCo's parent-child filter) and the object, all with condim 3, and
+// the explicit pairs are gone. For the benchmark's before/after contact count (thesis
+// 6.4.3: 40 -> 20). Rewrites the generated MJCF text; throws std::invalid_argument when
+// the text has no hand geoms to unprune (not an ADROIT model).
+std::string unprunedXml(const std::string& xml);
+adroit::ModelPtr loadUnprunedPlanningModel(const std::string& path, const PlanningModelSettings& settings);
+
+// share/adroit_description of the first prefix on CMAKE_PREFIX_PATH (or ROS_PACKAGE_PATH)
+// that holds scenes.txt: where ROS-free programs and tests find the generated models.
+// Throws std::runtime_error naming the variables searched.
+std::string descriptionShareDir();
+
+// Contact points of the last collision pass that entered the constraint set (within their
+// margin, not excluded): what the solver pays for.
+int activeContacts(const mjData* data);
+
+}  // namespace adroit_mpc

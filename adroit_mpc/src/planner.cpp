@@ -1,0 +1,210 @@
+#include "adroit_mpc/planner.h"
+
+#include "adroit_mpc/ilqg_planner.h"
+#include "adroit_mpc/sampling_planner.h"
+
+#include <algorithm>
+#include <stdexcept>
+
+namespace adroit_mpc {
+
+// ---------------------------------------------------------------------------- PlanPolicy
+
+void PlanPolicy::bind(const mjModel* m) {
+  model_ = m;
+  x_nominal_.resize(m->nq + m->nv + m->na);
+  dx_.resize(2 * m->nv + m->na);
+  u_.resize(m->nu);
+}
+
+void PlanPolicy::action(double t, const double* qpos, const double* qvel, const double* act, double* ctrl,
+                        double feedback_scale) const {
+  if (!model_) throw std::logic_error("PlanPolicy::action: bind() the planning model first");
+  if (policy.knots() == 0) throw std::logic_error("PlanPolicy::action: the policy is empty (no plan yet)");
+  policy.nominalState(t, x_nominal_);
+  stateDifference(model_, x_nominal_.data(), qpos, qvel, act, dx_);
+  policy.action(t, dx_, u_, feedback_scale);
+  for (int i = 0; i < model_->nu; ++i) {
+    double u = u_[i];
+    if (model_->actuator_ctrllimited[i])
+      u = std::min(std::max(u, model_->actuator_ctrlrange[2 * i]), model_->actuator_ctrlrange[2 * i + 1]);
+    ctrl[i] = u;
+  }
+}
+
+// ------------------------------------------------------------------------- shared pieces
+
+int validatePlannerSettings(const mjModel* m, const PlannerSettings& s) {
+  auto bad = [](const std::string& what) { throw std::invalid_argument("planner settings: " + what); };
+  if (!m) bad("no model");
+  if (!(s.dt > 0)) bad("dt must be positive, got " + std::to_string(s.dt));
+  if (std::fabs(m->opt.timestep - s.dt) > 1e-9 * s.dt)
+    bad("dt " + std::to_string(s.dt) + " differs from the planning model's timestep " +
+        std::to_string(m->opt.timestep) + " (applyPlanningSettings sets it)");
+  if (!(s.horizon > 0)) bad("horizon must be positive, got " + std::to_string(s.horizon));
+  const int knots = static_cast<int>(std::lround(s.horizon / s.dt));
+  if (knots < 2) bad("horizon / dt gives " + std::to_string(knots) + " knots, need at least 2");
+  if (s.threads < 0) bad("threads must be >= 0");
+  if (s.iterations < 1) bad("iterations must be >= 1");
+  if (!(s.fd_epsilon > 0)) bad("fd_epsilon must be positive");
+  if (s.derivative_skip < 1) bad("derivative_skip must be >= 1");
+  if (!(s.mu_initial >= 0)) bad("mu_initial must be >= 0");
+  if (!(s.feedback_scale >= 0 && s.feedback_scale <= 1)) bad("feedback_scale must be in [0, 1]");
+  if (s.samples < 1) bad("samples must be >= 1");
+  if (!(s.noise_scale >= 0)) bad("noise_scale must be >= 0");
+  if (s.spline_points < 1) bad("spline_points must be >= 1");
+  return knots;
+}
+
+void ControlSpace::initialize(const mjModel* m, bool synergies) {
+  nu_ = m->nu;
+  has_synergies_ = synergies;
+  const int n = nu_ + (synergies ? Synergies::kCount : 0);
+  lower_.resize(n);
+  upper_.resize(n);
+  for (int i = 0; i < nu_; ++i) {
+    if (!m->actuator_ctrllimited[i])
+      throw std::invalid_argument("planner: actuator " + std::to_string(i) +
+                                  " has no ctrlrange (the planners need bounded controls)");
+    lower_[i] = m->actuator_ctrlrange[2 * i];
+    upper_[i] = m->actuator_ctrlrange[2 * i + 1];
+  }
+  if (synergies) {
+    synergies_ = Synergies(m);
+    lower_.tail(Synergies::kCount).setConstant(-1);
+    upper_.tail(Synergies::kCount).setConstant(1);
+  }
+  ctrl_.resize(nu_);
+  mask_.resize(nu_);
+}
+
+void ControlSpace::toCtrl(const Eigen::VectorXd& u, double* ctrl) const {
+  if (has_synergies_) {
+    synergies_.apply(u.data(), ctrl);
+  } else {
+    for (int i = 0; i < nu_; ++i) ctrl[i] = std::min(std::max(u[i], lower_[i]), upper_[i]);
+  }
+}
+
+void ControlSpace::chainRule(const Eigen::MatrixXd& B_act, const Eigen::VectorXd& u, Eigen::MatrixXd& B) const {
+  if (!has_synergies_) {
+    B = B_act;
+    return;
+  }
+  synergies_.apply(u.data(), ctrl_.data(), mask_.data());
+  B.leftCols(nu_) = B_act * mask_.asDiagonal();
+  B.rightCols(Synergies::kCount).noalias() = B.leftCols(nu_) * synergies_.map();
+}
+
+void ControlSpace::chainGains(const Eigen::VectorXd& u, const Eigen::MatrixXd& K, Eigen::MatrixXd& K_ctrl) const {
+  if (!has_synergies_) {
+    K_ctrl = K;
+    return;
+  }
+  synergies_.apply(u.data(), ctrl_.data(), mask_.data());
+  K_ctrl = K.topRows(nu_);
+  K_ctrl.noalias() += synergies_.map() * K.bottomRows(Synergies::kCount);
+  K_ctrl = mask_.asDiagonal() * K_ctrl;
+}
+
+void ControlSpace::safeControls(Eigen::VectorXd& u) const {
+  u.head(nu_) = lower_.head(nu_);
+  if (has_synergies_) u.tail(Synergies::kCount).setZero();
+}
+
+void KnotTrajectory::resize(const mjModel* m, int knots, int controls_size) {
+  const int n_state = m->nq + m->nv + m->na;
+  times.assign(knots + 1, 0.0);
+  states.assign(knots + 1, Eigen::VectorXd::Zero(n_state));
+  controls.assign(knots, Eigen::VectorXd::Zero(controls_size));
+  ctrl.assign(knots, Eigen::VectorXd::Zero(m->nu));
+  costs.assign(knots + 1, 0.0);
+  total = 0;
+}
+
+void RolloutWorkspace::initialize(const mjModel* m, const Task& task) {
+  data = adroit::makeData(m);
+  scratch = task.makeScratch(m);
+  dx.resize(2 * m->nv + m->na);
+}
+
+void writePolicy(const mjModel* m, const KnotTrajectory& plan, const std::vector<Eigen::MatrixXd>* gains,
+                 PlanPolicy& out) {
+  const int T = static_cast<int>(plan.ctrl.size());
+  const int nx = 2 * m->nv + m->na;
+  adroit::TvlgPolicy& p = out.policy;
+  if (p.knots() != T || p.x.front().size() != plan.states.front().size() || p.K.front().cols() != nx ||
+      p.u.front().size() != m->nu) {
+    p = adroit::TvlgPolicy(m->nq + m->nv + m->na, nx, m->nu, T);
+    p.u_min.resize(m->nu);
+    p.u_max.resize(m->nu);
+    for (int i = 0; i < m->nu; ++i) {
+      p.u_min[i] = m->actuator_ctrllimited[i] ? m->actuator_ctrlrange[2 * i] : -mjMAXVAL;
+      p.u_max[i] = m->actuator_ctrllimited[i] ? m->actuator_ctrlrange[2 * i + 1] : mjMAXVAL;
+    }
+    out.bind(m);
+  }
+  p.t0 = plan.times.front();
+  p.dt = m->opt.timestep;
+  for (int t = 0; t < T; ++t) {
+    p.x[t] = plan.states[t];
+    p.u[t] = plan.ctrl[t];
+    if (gains) p.K[t] = (*gains)[t];
+    else p.K[t].setZero();
+  }
+  out.cost = plan.total;
+}
+
+void writeTrajectory(const KnotTrajectory& plan, Trajectory& out) {
+  if (out.states.size() != plan.states.size() || out.controls.size() != plan.controls.size() ||
+      (!out.controls.empty() && out.controls.front().size() != plan.controls.front().size())) {
+    out.times = plan.times;
+    out.states = plan.states;
+    out.ctrl = plan.ctrl;
+    out.controls = plan.controls;
+  }
+  std::copy(plan.times.begin(), plan.times.end(), out.times.begin());
+  for (std::size_t t = 0; t < plan.states.size(); ++t) out.states[t] = plan.states[t];
+  for (std::size_t t = 0; t < plan.ctrl.size(); ++t) {
+    out.ctrl[t] = plan.ctrl[t];
+    out.controls[t] = plan.controls[t];
+  }
+  out.cost = plan.total;
+}
+
+void readState(const mjModel* m, const mjData* d, Eigen::VectorXd& state) {
+  mju_copy(state.data(), d->qpos, m->nq);
+  mju_copy(state.data() + m->nq, d->qvel, m->nv);
+  if (m->na) mju_copy(state.data() + m->nq + m->nv, d->act, m->na);
+}
+
+void stateDifference(const mjModel* m, const double* nominal, const double* qpos, const double* qvel,
+                     const double* act, Eigen::VectorXd& dx) {
+  // qvel = (qpos2 - qpos1) / dt with dt = 1: the tangent of the nominal -> measured rotation.
+  mj_differentiatePos(m, dx.data(), 1.0, nominal, qpos);
+  const double* v_nominal = nominal + m->nq;
+  for (int i = 0; i < m->nv; ++i) dx[m->nv + i] = qvel[i] - v_nominal[i];
+  for (int i = 0; i < m->na; ++i) dx[2 * m->nv + i] = act[i] - v_nominal[m->nv + i];
+}
+
+void integrateAfterForward(const mjModel* m, mjData* d) {
+  switch (m->opt.integrator) {
+    case mjINT_EULER:
+      mj_Euler(m, d);
+      break;
+    case mjINT_RK4:
+      mj_RungeKutta(m, d, 4);
+      break;
+    default:  // implicit: 2.2.2 exposes no separate update, so step again (forward repeats)
+      mj_step(m, d);
+      break;
+  }
+}
+
+std::unique_ptr<Planner> makePlanner(const std::string& name) {
+  if (name == "ilqg") return std::make_unique<IlqgPlanner>();
+  if (name == "sampling") return std::make_unique<SamplingPlanner>();
+  throw std::invalid_argument("unknown planner '" + name + "' (known: ilqg, sampling)");
+}
+
+}  // namespace adroit_mpc

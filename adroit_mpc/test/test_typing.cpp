@@ -1,0 +1,242 @@
+// The typing task's state machine and costs on the real keypad model: key joints pushed in
+// mjData, mj_forward, observe() -> key / error / done events, release hysteresis, auto-correct
+// through backspace, the finger heat map, the smooth-step schedule.
+#include <gtest/gtest.h>
+
+#include <adroit_core/mujoco_model.h>
+#include <adroit_description/scenes.h>
+
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+
+#include "adroit_mpc/planning_model.h"
+#include "adroit_mpc/task.h"
+#include "adroit_mpc/type_task.h"
+
+namespace {
+
+using adroit_mpc::TaskEvent;
+using adroit_mpc::TypeTask;
+
+class Typing : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    model = adroit::loadModelFile(adroit::description::sceneFile(adroit_mpc::descriptionShareDir(), "keypad", true)).model;
+    data = adroit::makeData(model.get());
+    m = model.get();
+    task = std::make_unique<TypeTask>();
+    task->bind(m, 5);
+    const int rest = mj_name2id(m, mjOBJ_KEY, "rest");
+    mju_copy(data->qpos, m->key_qpos + rest * m->nq, m->nq);
+    mj_forward(m, data.get());
+  }
+  // Key joint to a depth [m below its top] and observe at time t.
+  std::vector<TaskEvent> push(const std::string& label, double depth, double t) {
+    data->qpos[m->jnt_qposadr[mj_name2id(m, mjOBJ_JOINT, ("KEY_" + label).c_str())]] = -depth;
+    mj_forward(m, data.get());
+    return task->observe(m, data.get(), t);
+  }
+  // A full press and release of one key; the events of the press.
+  std::vector<TaskEvent> tap(const std::string& label, double t) {
+    auto events = push(label, 0.0058, t);
+    EXPECT_TRUE(push(label, 0.0, t + 0.05).empty());
+    return events;
+  }
+  double cost(double t) {
+    auto scratch = task->makeScratch(m);
+    return task->terminalCost(m, data.get(), t, *scratch);
+  }
+
+  adroit::ModelPtr model;
+  adroit::DataPtr data;
+  const mjModel* m = nullptr;
+  std::unique_ptr<TypeTask> task;
+};
+
+TEST_F(Typing, SetSequenceAcceptsDigitsOnly) {
+  std::string why;
+  EXPECT_FALSE(task->setSequence("12a", &why));
+  EXPECT_NE(why.find("'a' at position 3 is not a digit"), std::string::npos) << why;
+  EXPECT_FALSE(task->setSequence("1 2", &why));
+  EXPECT_FALSE(task->setSequence(std::string(TypeTask::kMaxSequence + 1, '1'), &why));
+  EXPECT_NE(why.find("longer"), std::string::npos) << why;
+  EXPECT_EQ(task->sequence(), "");  // nothing taken
+  EXPECT_TRUE(task->setSequence("0123456789", &why)) << why;
+  EXPECT_EQ(task->error(m, data.get()), 10);
+}
+
+TEST_F(Typing, PressesRegisterAtThePressDepthOnce) {
+  std::string why;
+  ASSERT_TRUE(task->setSequence("12", &why));
+  EXPECT_EQ(task->currentTarget(), "1");
+  EXPECT_EQ(task->nextTarget(), "2");
+  EXPECT_TRUE(push("1", 0.0050, 0.0).empty());  // 5 mm: not yet (registers at 5.5 mm)
+  auto events = push("1", 0.0056, 0.01);
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].kind, "key");
+  EXPECT_EQ(events[0].detail, "1");
+  EXPECT_EQ(task->currentTarget(), "2");
+  EXPECT_EQ(task->error(m, data.get()), 1);
+  // Held, or lifted only to 4 mm (above the press depth, below the 3.5 mm release): no repeat.
+  EXPECT_TRUE(push("1", 0.0058, 0.02).empty());
+  EXPECT_TRUE(push("1", 0.0040, 0.03).empty());
+  EXPECT_TRUE(push("1", 0.0058, 0.04).empty());
+  EXPECT_EQ(task->currentTarget(), "2");
+  // Released above 3.5 mm, pressed again: a second (wrong) press of 1.
+  EXPECT_TRUE(push("1", 0.0030, 0.05).empty());
+  events = push("1", 0.0058, 0.06);
+  ASSERT_EQ(events.size(), 2u);
+  EXPECT_EQ(events[0].kind, "key");
+  EXPECT_EQ(events[1].kind, "error");
+  EXPECT_EQ(events[1].detail, "pressed 1 instead of 2");
+}
+
+TEST_F(Typing, WrongKeyIsCorrectedWithBackspace) {
+  std::string why;
+  ASSERT_TRUE(task->setSequence("47", &why));
+  ASSERT_EQ(tap("4", 0.1).size(), 1u);
+  auto events = tap("8", 0.2);  // meant 7
+  ASSERT_EQ(events.size(), 2u);
+  EXPECT_EQ(events[1].kind, "error");
+  EXPECT_EQ(events[1].detail, "pressed 8 instead of 7");
+  EXPECT_EQ(task->currentTarget(), "bs");
+  EXPECT_EQ(task->nextTarget(), "7");
+  EXPECT_EQ(task->error(m, data.get()), 2);  // one backspace + the 7
+  events = tap("bs", 0.3);
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].detail, "bs");
+  EXPECT_EQ(task->currentTarget(), "7");
+  events = tap("7", 0.4);
+  ASSERT_EQ(events.size(), 2u);
+  EXPECT_EQ(events[0].detail, "7");
+  EXPECT_EQ(events[1].kind, "done");
+  EXPECT_EQ(events[1].detail, "47");
+  EXPECT_EQ(task->error(m, data.get()), 0);
+  EXPECT_EQ(task->currentTarget(), "");
+}
+
+TEST_F(Typing, TwoWrongKeysNeedTwoBackspaces) {
+  std::string why;
+  ASSERT_TRUE(task->setSequence("5", &why));
+  tap("6", 0.1);
+  tap("9", 0.2);
+  EXPECT_EQ(task->pendingBackspaces(), 2);
+  EXPECT_EQ(task->currentTarget(), "bs");
+  EXPECT_EQ(task->nextTarget(), "bs");
+  tap("bs", 0.3);
+  EXPECT_EQ(task->currentTarget(), "bs");
+  EXPECT_EQ(task->nextTarget(), "5");
+  tap("bs", 0.4);
+  EXPECT_EQ(task->currentTarget(), "5");
+  EXPECT_EQ(task->error(m, data.get()), 1);
+}
+
+TEST_F(Typing, FingerHeatMapFromTheKeypadLayout) {
+  // At the rest keyframe the fingertips sit at x -0.033 (ff), -0.011 (mf), 0.011 (rf),
+  // 0.034 (lf); the key columns at x -0.022 (1 4 7 bs), 0 (2 5 8 0), 0.022 (3 6 9 ent).
+  // Distinct fingers per column, least summed distance: ff, mf, rf (0.3026 m against 0.3086 m
+  // for mf, rf, lf, worked out from the keyframe positions).
+  const int ff = 0, mf = 1, rf = 2;
+  for (const char* key : {"1", "4", "7", "bs"}) EXPECT_EQ(task->fingerOfKey(key), ff) << key;
+  for (const char* key : {"2", "5", "8", "0"}) EXPECT_EQ(task->fingerOfKey(key), mf) << key;
+  for (const char* key : {"3", "6", "9", "ent"}) EXPECT_EQ(task->fingerOfKey(key), rf) << key;
+  EXPECT_EQ(task->keyLabels().size(), 12u);
+
+  adroit_mpc::TaskParams p;
+  p.strings["finger_assignment"] = "0:th, ent:lf";
+  TypeTask overridden(p);
+  overridden.bind(m, 0);
+  EXPECT_EQ(overridden.fingerOfKey("0"), 4);
+  EXPECT_EQ(overridden.fingerOfKey("ent"), 3);
+  EXPECT_EQ(overridden.fingerOfKey("2"), mf);
+  p.strings["finger_assignment"] = "star:th";
+  TypeTask unknown_key(p);
+  try {
+    unknown_key.bind(m, 0);
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("no key 'star'"), std::string::npos) << e.what();
+  }
+}
+
+TEST_F(Typing, StepScheduleFollowsKeyEvents) {
+  std::string why;
+  ASSERT_TRUE(task->setSequence("123", &why));
+  tap("1", 2.0);
+  // Event at t = 2.0, observed up to 2.05: S_up from 2.0 to max(2.0 + 0.25, 2.05 + 0.1).
+  auto step = task->currentStep();
+  EXPECT_DOUBLE_EQ(step.a1, 2.0);
+  EXPECT_DOUBLE_EQ(step.a2, 2.25);
+  EXPECT_GT(step.up(2.1), 0.95);
+  EXPECT_LT(step.up(2.6), 0.05);
+  // A slow press: the switch to the next key stays ahead of the latest observation.
+  push("2", 0.001, 3.0);
+  EXPECT_DOUBLE_EQ(task->currentStep().a2, 3.1);
+}
+
+TEST_F(Typing, CostRewardsTheTargetKeyAndPenalisesOthers) {
+  std::string why;
+  ASSERT_TRUE(task->setSequence("5", &why));
+  const double idle = cost(0.05);
+  push("5", 0.006, 0.0);  // fully down (registers, but look at the cost first on a copy)
+  auto fresh = std::make_unique<TypeTask>();
+  fresh->bind(m, 5);
+  ASSERT_TRUE(fresh->setSequence("5", &why));
+  auto scratch = fresh->makeScratch(m);
+  EXPECT_LT(fresh->terminalCost(m, data.get(), 0.05, *scratch), idle);
+  push("5", 0.0, 0.01);
+  push("9", 0.006, 0.0);  // a key that is not wanted
+  mj_forward(m, data.get());
+  EXPECT_GT(fresh->terminalCost(m, data.get(), 0.05, *scratch), idle);
+}
+
+TEST_F(Typing, RepeatedKeyMustComeUpFirst) {
+  std::string why;
+  ASSERT_TRUE(task->setSequence("11", &why));
+  push("1", 0.006, 0.0);  // first 1 registered and still held
+  EXPECT_EQ(task->currentTarget(), "1");
+  const double held_down = cost(0.05);
+  data->qpos[m->jnt_qposadr[mj_name2id(m, mjOBJ_JOINT, "KEY_1")]] = -0.004;  // partly up, still held
+  mj_forward(m, data.get());
+  EXPECT_LT(cost(0.05), held_down);
+}
+
+TEST_F(Typing, CopyParametersCarriesTheProgress) {
+  auto planner_copy = task->clone();
+  std::string why;
+  ASSERT_TRUE(task->setSequence("36", &why));
+  tap("3", 1.0);
+  task->setWeight("w_press", 4.0);
+  planner_copy->copyParametersFrom(*task);
+  auto* copy = dynamic_cast<TypeTask*>(planner_copy.get());
+  ASSERT_NE(copy, nullptr);
+  EXPECT_EQ(copy->sequence(), "36");
+  EXPECT_EQ(copy->currentTarget(), "6");
+  EXPECT_EQ(copy->typedCorrectly(), 1);
+  EXPECT_EQ(copy->weight("w_press"), 4.0);
+  EXPECT_DOUBLE_EQ(copy->currentStep().a1, 1.0);
+  EXPECT_EQ(copy->error(m, data.get()), 1);
+  auto catcher = adroit_mpc::makeTask("catch", {});
+  EXPECT_THROW(planner_copy->copyParametersFrom(*catcher), std::invalid_argument);
+}
+
+TEST_F(Typing, ObjectGoalsAreNotTaken) {
+  std::string why;
+  EXPECT_FALSE(task->setGoal({0, 0, 0}, Eigen::Quaterniond::Identity(), &why));
+  EXPECT_NE(why.find("type"), std::string::npos);
+  EXPECT_FALSE(task->release(&why));
+}
+
+TEST(TypingBinding, NeedsAKeypad) {
+  auto hand = adroit::loadModelFile(adroit::description::sceneFile(adroit_mpc::descriptionShareDir(), "hand", true)).model;
+  TypeTask task;
+  try {
+    task.bind(hand.get(), 0);
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("key joints"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace

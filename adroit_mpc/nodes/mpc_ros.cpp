@@ -1,0 +1,390 @@
+// Set-up, the planner thread, the control thread and the lockstep loop (see mpc_ros.h).
+#include <adroit_msgs/Step.h>
+#include <diagnostic_msgs/DiagnosticArray.h>
+#include <std_srvs/SetBool.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "adroit_mpc/planning_model.h"
+#include "adroit_mpc/synergies.h"
+#include "mpc_ros.h"
+
+namespace adroit::mpc_node {
+
+namespace {
+
+const char* const kTipSites[] = {"S_fftip", "S_mftip", "S_rftip", "S_lftip", "S_thtip"};
+
+void sizeSnapshot(StateSnapshot& s, const mjModel* m) {
+  s.qpos.assign(m->qpos0, m->qpos0 + m->nq);
+  s.qvel.assign(m->nv, 0.0);
+  s.act.assign(m->na, 0.0);
+}
+
+// Table 6.3: contacts seen coming 10 mm ahead with 5 mm softness for the object tasks; the
+// keypad needs both at 1 mm (keys 6 mm apart in travel).
+adroit_mpc::PlanningModelSettings planningSettings(const MpcParams& p) {
+  adroit_mpc::PlanningModelSettings s;
+  s.timestep = p.settings.dt;
+  if (p.task == "type") s.contact_margin = 0.001, s.contact_softness = 0.001;
+  return s;
+}
+
+}  // namespace
+
+MpcNode::MpcNode(ros::NodeHandle nh, ros::NodeHandle pnh)
+    : nh_(nh),
+      pnh_(pnh),
+      rejections_({"joint_states_length", "joint_states_nonfinite", "joint_states_missing_joint",
+                   "odom_nonfinite", "odom_quaternion", "odom_frame", "goal", "task_name", "task_command"}) {
+  params_ = readParams(pnh_);
+  try {
+    model_ = adroit_mpc::loadPlanningModel(params_.model_file, planningSettings(params_));
+  } catch (const std::exception& e) {
+    throw ParameterError("bad parameter " + pnh_.resolveName(pnh_.hasParam("model_file") ? "model_file" : "scene") +
+                         ": " + e.what());
+  }
+  const mjModel* m = model_.get();
+  tables_ = std::make_unique<ModelTables>(m);
+  synergy_dims_ = params_.settings.synergies ? adroit_mpc::Synergies::kCount : 0;
+  for (int j = 0; j < m->njnt; ++j) {
+    if (m->jnt_type[j] == mjJNT_HINGE || m->jnt_type[j] == mjJNT_SLIDE) hinge_joints_.push_back(j);
+  }
+  if (const auto j = tables_->joints.find("object_root"); j && m->jnt_type[*j] == mjJNT_FREE) {
+    object_qpos_ = m->jnt_qposadr[*j];
+    object_dof_ = m->jnt_dofadr[*j];
+  }
+  actuator_names_ = tables_->actuators.names();
+  for (const char* site : kTipSites) {
+    if (const auto s = tables_->sites.find(site)) tip_sites_.push_back(*s);
+  }
+  if (const auto b = tables_->bodies.find("object")) object_body_ = *b;
+
+  for (StateSnapshot* s : {&incoming_, &plan_state_, &control_state_}) sizeSnapshot(*s, m);
+  planner_state_.qpos = incoming_.qpos;
+  planner_state_.qvel = incoming_.qvel;
+  planner_state_.act = incoming_.act;
+  observe_data_ = makeData(m);
+  marker_data_ = makeData(m);
+
+  std::string why;
+  live_task_ = buildTask(params_.task, &why);
+  if (!live_task_) throw ParameterError("bad parameter " + pnh_.resolveName("task") + ": " + why);
+  task_name_ = params_.task;
+  planner_ = adroit_mpc::makePlanner(params_.planner);
+  planner_->initialize(m, *live_task_, params_.settings);
+  horizon_ = params_.settings.horizon;
+  policies_.bind(m);
+
+  ctrl_.assign(m->nu, 0.0);
+  force_msg_.index.resize(m->nu);
+  for (int i = 0; i < m->nu; ++i) force_msg_.index[i] = static_cast<std::uint16_t>(i);
+  force_msg_.force.assign(m->nu, 0.0);
+  reference_msg_.name = actuator_names_;
+  reference_msg_.dt = params_.settings.dt;
+  const int max_knots = static_cast<int>(std::ceil(2.0 / params_.settings.dt)) + 2;  // the reconfigure limit
+  reference_msg_.force.reserve(static_cast<std::size_t>(max_knots) * m->nu);
+
+  ros::NodeHandle mpc(nh_, "/adroit/mpc");
+  force_pub_ = nh_.advertise<adroit_msgs::TendonForceCommand>("/adroit/tendon_force_command", 10);
+  reference_pub_ = nh_.advertise<adroit_msgs::ForceReference>("/adroit/force_reference", 10);
+  diag_pub_ = nh_.advertise<diagnostic_msgs::DiagnosticArray>("/adroit/diagnostics", 10);
+  marker_pub_ = mpc.advertise<visualization_msgs::MarkerArray>("markers", 2);
+  typed_pub_ = mpc.advertise<std_msgs::String>("typed", 20);
+  events_pub_ = mpc.advertise<std_msgs::String>("events", 20);
+  services_.push_back(mpc.advertiseService("set_task", &MpcNode::onSetTask, this));
+  services_.push_back(mpc.advertiseService("release", &MpcNode::onRelease, this));
+  goal_sub_ = mpc.subscribe("goal", 5, &MpcNode::onGoal, this);
+  type_sub_ = mpc.subscribe("type", 5, &MpcNode::onType, this);
+
+  // States on their own queue: marker building or a service never delays them.
+  ros::NodeHandle state_nh(nh_);
+  state_nh.setCallbackQueue(&state_queue_);
+  joint_sub_ = state_nh.subscribe("/adroit/joint_states", 10, &MpcNode::onJointState, this,
+                                  ros::TransportHints().tcpNoDelay());
+  if (object_qpos_ >= 0)
+    odom_sub_ = state_nh.subscribe("/adroit/object/odom", 10, &MpcNode::onOdometry, this,
+                                   ros::TransportHints().tcpNoDelay());
+
+  if (params_.lockstep) {
+    step_client_ = nh_.serviceClient<adroit_msgs::Step>("/adroit/step");
+    pause_client_ = nh_.serviceClient<std_srvs::SetBool>("/adroit/pause");
+  }
+  setupGoalMarker();
+  // Dynamic reconfigure starts from the running task's weights and the horizon.
+  {
+    std::lock_guard<std::mutex> lock(task_mutex_);
+    pnh_.setParam("horizon", params_.settings.horizon);
+    for (const auto& w : live_task_->weightNames()) pnh_.setParam(w, live_task_->weight(w));
+  }
+  reconfigure_ = std::make_unique<dynamic_reconfigure::Server<Config>>(reconfigure_mutex_, pnh_);
+  reconfigure_->setCallback([this](Config& config, uint32_t level) { onReconfigure(config, level); });
+  reconfigure_ready_ = true;
+  syncReconfigure();
+
+  if (params_.marker_rate > 0)
+    marker_timer_ = nh_.createWallTimer(ros::WallDuration(1.0 / params_.marker_rate), &MpcNode::onMarkerTimer, this);
+  diag_timer_ = nh_.createWallTimer(ros::WallDuration(params_.diagnostics_period), &MpcNode::onDiagnostics, this);
+}
+
+MpcNode::~MpcNode() { stop(); }
+
+void MpcNode::start() {
+  running_ = true;
+  state_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &state_queue_);
+  state_spinner_->start();
+  default_spinner_ = std::make_unique<ros::AsyncSpinner>(1);
+  default_spinner_->start();
+  if (params_.lockstep) {
+    planner_thread_ = std::thread(&MpcNode::lockstepLoop, this);
+  } else {
+    planner_thread_ = std::thread(&MpcNode::plannerLoop, this);
+    if (params_.force_mode) control_thread_ = std::thread(&MpcNode::controlLoop, this);
+  }
+  ROS_INFO("adroit_mpc: task %s, planner %s, %s mode%s, horizon %.3f s at dt %.4f s, %d iteration(s), synergies %s, "
+           "model %s",
+           task_name_.c_str(), params_.planner.c_str(), params_.force_mode ? "force" : "pneumatic",
+           params_.lockstep ? " (lockstep)" : "", params_.settings.horizon, params_.settings.dt,
+           params_.settings.iterations, synergy_dims_ > 0 ? "on" : "off", params_.model_file.c_str());
+}
+
+void MpcNode::stop() {
+  running_ = false;
+  if (planner_thread_.joinable()) planner_thread_.join();
+  if (control_thread_.joinable()) control_thread_.join();
+  if (default_spinner_) default_spinner_->stop();
+  if (state_spinner_) state_spinner_->stop();
+}
+
+// --- planner thread ------------------------------------------------------------------------
+
+bool MpcNode::planOnce(const StateSnapshot& state) {
+  const mjModel* m = model_.get();
+  planner_state_.time = state.time;
+  std::copy(state.qpos.begin(), state.qpos.end(), planner_state_.qpos.begin());
+  std::copy(state.qvel.begin(), state.qvel.end(), planner_state_.qvel.begin());
+  std::copy(state.act.begin(), state.act.end(), planner_state_.act.begin());
+
+  // The task's progress on the real system (key presses, phases) from the estimated state.
+  mjData* d = observe_data_.get();
+  d->time = state.time;
+  mju_copy(d->qpos, state.qpos.data(), m->nq);
+  mju_copy(d->qvel, state.qvel.data(), m->nv);
+  if (m->na > 0) mju_copy(d->act, state.act.data(), m->na);
+  mj_forward(m, d);
+  std::vector<adroit_mpc::TaskEvent> events;
+  {
+    std::lock_guard<std::mutex> lock(task_mutex_);
+    events = live_task_->observe(m, d, state.time);
+    // A switched task or another horizon: re-initialise (allocates; only on such a change).
+    if (task_switched_ || pending_horizon_) {
+      if (pending_horizon_) params_.settings.horizon = *pending_horizon_;
+      pending_horizon_.reset();
+      task_switched_ = false;
+      planner_->initialize(m, *live_task_, params_.settings);
+      horizon_ = params_.settings.horizon;
+    }
+    planner_->setTask(*live_task_);
+  }
+  if (!events.empty()) publishEvents(events);
+  planner_->setState(planner_state_);
+
+  const adroit_mpc::OptimizeReport report = planner_->optimize();
+  solves_.fetch_add(1, std::memory_order_relaxed);
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    Window& w = window_;
+    w.sum.rollout += report.rollout, w.sum.derivatives += report.derivatives, w.sum.cost += report.cost;
+    w.sum.backward += report.backward, w.sum.line_search += report.line_search, w.sum.total += report.total;
+    w.total_max = std::max(w.total_max, report.total);
+    ++w.solves;
+    last_report_ = report;
+  }
+  if (report.diverged || !std::isfinite(report.cost_after)) {
+    // Never published; the planner has gone back to its safe warm start (reset() again in
+    // case it only reported a non-finite cost).
+    if (!report.diverged) planner_->reset();
+    diverged_.fetch_add(1, std::memory_order_relaxed);
+    ROS_WARN_THROTTLE(1.0, "adroit_mpc: solve diverged (non-finite cost); plan reset to the warm start, not published");
+    return false;
+  }
+  planner_->policy(policies_.back());
+  policies_.publish();
+  policies_published_.fetch_add(1, std::memory_order_relaxed);
+  if (markers_wanted_.load(std::memory_order_relaxed)) takeMarkerSnapshot();
+  return true;
+}
+
+void MpcNode::plannerLoop() {
+  while (running_ && ros::ok()) {
+    if (stateAgeWall() > params_.state_timeout || !latestState(plan_state_)) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      continue;
+    }
+    if (planOnce(plan_state_) && !params_.force_mode) sendForceReference(nodeTime(ros::Time::now()));
+  }
+}
+
+void MpcNode::publishEvents(const std::vector<adroit_mpc::TaskEvent>& events) {
+  for (const auto& e : events) {
+    std_msgs::String msg;
+    msg.data = e.kind + ": " + e.detail;
+    events_pub_.publish(msg);
+    if (e.kind == "key") {
+      msg.data = e.detail;
+      typed_pub_.publish(msg);
+    }
+  }
+}
+
+void MpcNode::sendForceReference(double t) {
+  // The best trajectory's tensions from the knot at or before now to the horizon's end:
+  // the pools track the future, not just the present (thesis 7.4).
+  const adroit_mpc::Trajectory& plan = planner_->bestTrajectory();
+  const std::size_t knots = std::min(plan.ctrl.size(), plan.times.size());
+  if (knots == 0) return;
+  std::size_t k0 = 0;
+  while (k0 + 1 < knots && plan.times[k0 + 1] <= t) ++k0;
+  const std::size_t steps = knots - k0, nu = actuator_names_.size();
+  reference_msg_.header.stamp = rosTime(plan.times[k0]);
+  reference_msg_.dt = params_.settings.dt;
+  reference_msg_.steps = static_cast<std::uint32_t>(steps);
+  reference_msg_.force.resize(steps * nu);
+  for (std::size_t k = 0; k < steps; ++k) {
+    const Eigen::VectorXd& u = plan.ctrl[k0 + k];
+    for (std::size_t j = 0; j < nu; ++j) reference_msg_.force[k * nu + j] = std::max(0.0, u[j]);
+  }
+  reference_pub_.publish(reference_msg_);
+  references_sent_.fetch_add(1, std::memory_order_relaxed);
+  publishing_ = true;
+}
+
+// --- control ---------------------------------------------------------------------------------
+
+void MpcNode::sendForces(double t, const StateSnapshot& state) {
+  const adroit_mpc::PlanPolicy& plan = policies_.front();
+  // A policy older than its horizon says nothing about now (after a stall): send nothing.
+  const double age = t - plan.policy.t0;
+  if (age > horizon_.load(std::memory_order_relaxed)) return;
+  plan.action(t, state.qpos.data(), state.qvel.data(), state.act.data(), ctrl_.data(), params_.feedback_scale);
+  for (std::size_t i = 0; i < ctrl_.size(); ++i) {
+    if (!std::isfinite(ctrl_[i])) return;  // the driver would reject it; keep silent, count below
+    force_msg_.force[i] = std::max(0.0, ctrl_[i]);
+  }
+  force_msg_.header.stamp = rosTime(t);
+  force_pub_.publish(force_msg_);
+  commands_sent_.fetch_add(1, std::memory_order_relaxed);
+  publishing_ = true;
+  std::unique_lock<std::mutex> lock(stats_mutex_, std::try_to_lock);  // never waits
+  if (lock.owns_lock()) {
+    window_.age_sum += age;
+    window_.age_max = std::max(window_.age_max, age);
+    ++window_.age_samples;
+  }
+}
+
+void MpcNode::controlLoop() {
+  using Clock = std::chrono::steady_clock;
+  const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / params_.control_rate));
+  auto next = Clock::now();
+  while (running_ && ros::ok()) {
+    next += period;
+    std::this_thread::sleep_until(next);
+    const auto now = Clock::now();
+    if (now - next > period) next = now;  // overrun: resynchronise rather than catch up
+    if (stateAgeWall() > params_.state_timeout) {
+      if (publishing_.exchange(false)) {
+        stale_stops_.fetch_add(1, std::memory_order_relaxed);
+        ROS_WARN("adroit_mpc: no joint state for %.3f s: stopped publishing (the driver's watchdog takes over)",
+                 params_.state_timeout);
+      }
+      continue;
+    }
+    policies_.update();
+    if (!policies_.hasPolicy() || !latestState(control_state_)) continue;
+    sendForces(nodeTime(ros::Time::now()), control_state_);
+  }
+}
+
+// --- lockstep --------------------------------------------------------------------------------
+
+bool MpcNode::callStep(std::uint32_t steps, double* sim_time) {
+  adroit_msgs::Step srv;
+  srv.request.steps = steps;
+  if (!step_client_.call(srv) || !srv.response.success) {
+    lockstep_failures_.fetch_add(1, std::memory_order_relaxed);
+    ROS_ERROR_THROTTLE(1.0, "adroit_mpc: lockstep: /adroit/step failed: %s", srv.response.message.c_str());
+    return false;
+  }
+  *sim_time = srv.response.sim_time;
+  return true;
+}
+
+bool MpcNode::waitForState(double sim_time, StateSnapshot& out) {
+  // The driver answers a step once its states are published; they may still be on the wire.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+  while (running_ && ros::ok() && std::chrono::steady_clock::now() < deadline) {
+    if (latestState(out) && rosTime(out.time).toSec() >= sim_time - 1e-6) return true;
+    std::this_thread::sleep_for(std::chrono::microseconds(100));
+  }
+  return false;
+}
+
+void MpcNode::lockstepLoop() {
+  const int steps_per_control =
+      std::max(1, static_cast<int>(std::lround(1.0 / (params_.control_rate * params_.physics_timestep))));
+  while (running_ && ros::ok()) {
+    if (!step_client_.waitForExistence(ros::Duration(1.0)) || !pause_client_.waitForExistence(ros::Duration(1.0)))
+      continue;
+    std_srvs::SetBool pause;
+    pause.request.data = true;
+    if (!pause_client_.call(pause)) continue;
+    break;
+  }
+  ROS_INFO("adroit_mpc: lockstep: %d physics step(s) of %.4f s per control, %d control(s) per plan",
+           steps_per_control, params_.physics_timestep, params_.lockstep_controls_per_plan);
+  double sim_time = 0;
+  bool have_state = false;
+  while (running_ && ros::ok()) {
+    if (!have_state) {
+      // A state at the current simulated time (a paused driver publishes none by itself).
+      have_state = callStep(1, &sim_time) && waitForState(sim_time, plan_state_);
+      if (!have_state) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(100));
+        continue;
+      }
+    }
+    const bool planned = planOnce(plan_state_);
+    if (planned && !params_.force_mode) sendForceReference(plan_state_.time);
+    policies_.update();
+    control_state_.time = plan_state_.time;
+    control_state_.serial = plan_state_.serial;
+    control_state_.qpos = plan_state_.qpos;  // same sizes: copies, no allocation
+    control_state_.qvel = plan_state_.qvel;
+    control_state_.act = plan_state_.act;
+    for (int c = 0; c < params_.lockstep_controls_per_plan && running_; ++c) {
+      if (params_.force_mode && policies_.hasPolicy()) {
+        sendForces(control_state_.time, control_state_);
+        // The command travels on its own connection; give it time to arrive before the step.
+        std::this_thread::sleep_for(std::chrono::microseconds(300));
+      }
+      if (!callStep(static_cast<std::uint32_t>(steps_per_control), &sim_time) ||
+          !waitForState(sim_time, control_state_)) {
+        have_state = false;
+        publishing_ = false;
+        ROS_WARN_THROTTLE(1.0, "adroit_mpc: lockstep: no state after stepping; retrying");
+        break;
+      }
+    }
+    if (!have_state) continue;
+    plan_state_.time = control_state_.time;
+    plan_state_.serial = control_state_.serial;
+    plan_state_.qpos = control_state_.qpos;
+    plan_state_.qvel = control_state_.qvel;
+    plan_state_.act = control_state_.act;
+  }
+}
+
+}  // namespace adroit::mpc_node

@@ -56,6 +56,19 @@ int validatePlannerSettings(const mjModel* m, const PlannerSettings& s) {
   return knots;
 }
 
+void copyPlannerState(const mjModel* m, const PlannerState& in, PlannerState& out) {
+  if (static_cast<int>(in.qpos.size()) != m->nq || static_cast<int>(in.qvel.size()) != m->nv ||
+      static_cast<int>(in.act.size()) != m->na)
+    throw std::invalid_argument("planner state: sizes qpos " + std::to_string(in.qpos.size()) + " qvel " +
+                                std::to_string(in.qvel.size()) + " act " + std::to_string(in.act.size()) +
+                                " do not match the model (" + std::to_string(m->nq) + ", " +
+                                std::to_string(m->nv) + ", " + std::to_string(m->na) + ")");
+  out.time = in.time;
+  std::copy(in.qpos.begin(), in.qpos.end(), out.qpos.begin());
+  std::copy(in.qvel.begin(), in.qvel.end(), out.qvel.begin());
+  std::copy(in.act.begin(), in.act.end(), out.act.begin());
+}
+
 void ControlSpace::initialize(const mjModel* m, bool synergies) {
   nu_ = m->nu;
   has_synergies_ = synergies;

@@ -36,16 +36,7 @@ void SamplingPlanner::initialize(const mjModel* m, const Task& task, const Plann
 
 void SamplingPlanner::setState(const PlannerState& s) {
   if (!model_) throw std::logic_error("SamplingPlanner::setState before initialize()");
-  if (static_cast<int>(s.qpos.size()) != model_->nq || static_cast<int>(s.qvel.size()) != model_->nv ||
-      static_cast<int>(s.act.size()) != model_->na)
-    throw std::invalid_argument("planner state: sizes qpos " + std::to_string(s.qpos.size()) + " qvel " +
-                                std::to_string(s.qvel.size()) + " act " + std::to_string(s.act.size()) +
-                                " do not match the model (" + std::to_string(model_->nq) + ", " +
-                                std::to_string(model_->nv) + ", " + std::to_string(model_->na) + ")");
-  state_.time = s.time;
-  std::copy(s.qpos.begin(), s.qpos.end(), state_.qpos.begin());
-  std::copy(s.qvel.begin(), s.qvel.end(), state_.qvel.begin());
-  std::copy(s.act.begin(), s.act.end(), state_.act.begin());
+  copyPlannerState(model_, s, state_);
 }
 
 void SamplingPlanner::setTask(const Task& task) { task_->copyParametersFrom(task); }

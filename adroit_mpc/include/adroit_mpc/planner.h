@@ -104,6 +104,10 @@ std::unique_ptr<Planner> makePlanner(const std::string& name);
 // std::invalid_argument with one line naming the bad setting. Returns the number of knots T.
 int validatePlannerSettings(const mjModel* model, const PlannerSettings& settings);
 
+// Copies `in` into `out` (sized for the model at initialisation; no allocation). Throws
+// std::invalid_argument naming the sizes when they do not match the model.
+void copyPlannerState(const mjModel* model, const PlannerState& in, PlannerState& out);
+
 // The planner's control space [actuators | synergies], its box (ctrlrange; [-1, 1] for the
 // synergies) and the map to model controls.
 class ControlSpace {

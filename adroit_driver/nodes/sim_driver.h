@@ -160,7 +160,8 @@ class SimDriver {
   bool onEstop(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool onRelease(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   void reportCommand(const char* topic, const CommandResult& result);
-  void cancelSteps(const char* why);  // pending /step requests end, unsuccessful
+  void cancelSteps(const char* why);
+  void noteCommandStamp(const ros::Time& stamp);  // wakes a /step waiting for this command  // pending /step requests end, unsuccessful
   // Default queue (sim_services.cpp).
   bool onReset(adroit_msgs::Reset::Request& req, adroit_msgs::Reset::Response& res);
   bool onSetObjectPose(adroit_msgs::SetObjectPose::Request& req, adroit_msgs::SetObjectPose::Response& res);
@@ -222,6 +223,7 @@ class SimDriver {
   std::uint64_t pending_steps_ = 0;
   std::string step_interruption_;  // why the last pending steps were cancelled
   std::uint64_t step_cancellations_ = 0;
+  ros::Time last_command_stamp_;  // newest stamp of a valid force or valve command (lockstep)
   // A state change a service asked for, run by the simulation thread (changeState), and
   // the batch count that holds its republished state.
   const std::function<bool(std::string*)>* pending_change_ = nullptr;

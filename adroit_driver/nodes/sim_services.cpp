@@ -9,10 +9,15 @@ namespace adroit::driver {
 
 // ---------------------------------------------------------------------------- commands (safety queue)
 
+namespace {
+bool validCommand(const CommandResult& result) {
+  return result.verdict == CommandVerdict::kAccepted || result.verdict == CommandVerdict::kClamped;
+}
+}  // namespace
+
 void SimDriver::reportCommand(const char* topic, const CommandResult& result) {
   if (result.applied) return;
-  const bool valid = result.verdict == CommandVerdict::kAccepted || result.verdict == CommandVerdict::kClamped;
-  if (!valid) {
+  if (!validCommand(result)) {
     ROS_ERROR_THROTTLE(1.0, "adroit_sim: %s rejected: %s", topic, result.error.c_str());
     return;
   }
@@ -33,6 +38,7 @@ void SimDriver::onValveCommand(const adroit_msgs::ValveCommand::ConstPtr& msg) {
     result = robot_->applyValves(checked);
   }
   reportCommand("valve_command", result);
+  if (validCommand(result)) noteCommandStamp(msg->header.stamp);
 }
 
 void SimDriver::onForceCommand(const adroit_msgs::TendonForceCommand::ConstPtr& msg) {
@@ -43,6 +49,14 @@ void SimDriver::onForceCommand(const adroit_msgs::TendonForceCommand::ConstPtr& 
     result = robot_->applyForces(checked);
   }
   reportCommand("tendon_force_command", result);
+  if (validCommand(result)) noteCommandStamp(msg->header.stamp);
+}
+
+void SimDriver::noteCommandStamp(const ros::Time& stamp) {
+  std::lock_guard<std::mutex> lock(control_mutex_);
+  if (stamp <= last_command_stamp_) return;
+  last_command_stamp_ = stamp;
+  control_cv_.notify_all();
 }
 
 void SimDriver::cancelSteps(const char* why) {
@@ -130,6 +144,18 @@ bool SimDriver::onStep(adroit_msgs::Step::Request& req, adroit_msgs::Step::Respo
     res.success = false;
     res.message = "at most " + std::to_string(kMaxStepsPerRequest) + " steps per request, asked for " +
                   std::to_string(req.steps);
+  } else if (!req.command_stamp.isZero() &&
+             !control_cv_.wait_for(lock, std::chrono::seconds(2), [&] {
+               return last_command_stamp_ >= req.command_stamp || !running_ || !paused_;
+             })) {
+    // Lockstep: the command for this period travels on its own topic; stepping before it
+    // arrived would run the period on the previous command.
+    res.success = false;
+    res.message = "no valid force or valve command stamped at or after " + std::to_string(req.command_stamp.toSec()) +
+                  " s arrived within 2 s (newest " + std::to_string(last_command_stamp_.toSec()) + " s)";
+  } else if (!paused_ || !running_) {
+    res.success = false;
+    res.message = !running_ ? "the driver is stopping" : "the simulation was resumed while waiting for the command";
   } else if (req.steps > 0) {
     const std::uint64_t cancellations = step_cancellations_;
     pending_steps_ += req.steps;

@@ -88,7 +88,7 @@ class DriverClient:
     def step(self, steps=1, topic="actuator_states"):
         """Steps a paused simulation; returns (sim time, latest `topic` message after it)."""
         before = self.counted(topic)
-        res = self.step_srv(steps)
+        res = self.step_srv(steps=steps)
         assert res.success, res.message
         deadline = time.time() + 10
         while time.time() < deadline:

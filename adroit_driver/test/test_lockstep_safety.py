@@ -78,6 +78,34 @@ class LockstepSafety(unittest.TestCase):
         self.assertTrue(all(v == -5.0 for m in after for v in m.command))
         self.assertEqual(d.latest_safe_state(), True)
 
+    def test_step_waits_for_the_command_stamped_for_it(self):
+        """A lockstep controller's step names the stamp of its command: the driver steps only
+        once that command has arrived (so the period runs on it), and fails clearly when it
+        never comes."""
+        d = self.d
+        t, _ = d.step(1)
+        stamp = rospy.Time.from_sec(1000.0 + t)  # newer than any command sent so far
+        t0 = time.time()
+        r = d.step_srv(steps=1, command_stamp=stamp)
+        waited = time.time() - t0
+        self.assertFalse(r.success)
+        self.assertIn("no valid force or valve command stamped at or after", r.message)
+        self.assertGreater(waited, 1.5, "the step did not wait for the command")
+        # The step is requested first; the command follows 0.3 s later and is the one applied.
+        result = {}
+        stepper = threading.Thread(target=lambda: result.update(r=d.step_srv(steps=1, command_stamp=stamp)))
+        stepper.start()
+        time.sleep(0.3)
+        self.assertTrue(stepper.is_alive(), "stepped before its command arrived")
+        before = d.counted("actuator_states")
+        msg = ValveCommand(index=list(range(N)), volts=[2.5] * N)
+        msg.header.stamp = stamp
+        d.valve_pub.publish(msg)
+        stepper.join(timeout=5.0)
+        self.assertTrue(result["r"].success, result["r"].message)
+        state = d.wait_new("actuator_states", before, 5.0)
+        self.assertTrue(all(abs(v - 2.5) < 1e-12 for v in state.command), "the step ran on another command")
+
     def test_step_requests_are_bounded(self):
         r = self.d.step_srv(steps=500001)
         self.assertFalse(r.success)

@@ -114,7 +114,7 @@ class ResetState(unittest.TestCase):
         self.assertFalse(self.d.reset(keyframe="nope").success)
         self.assertFalse(self.d.reset(qpos=[0.0, 1.0]).success)
         self.assertFalse(self.d.reset(pressure=[float("nan")] * N).success)
-        self.assertTrue(self.d.step_srv(1).success, "node still running")
+        self.assertTrue(self.d.step_srv(steps=1).success, "node still running")
 
     def test_finite_but_absurd_states_are_refused_and_nothing_faults(self):
         """qpos 1e300, qvel 1e6, an object 1e300 m away, a joint far outside its range or a

@@ -263,14 +263,14 @@ void MpcNode::sendForceReference(double t) {
 
 // --- control ---------------------------------------------------------------------------------
 
-void MpcNode::sendForces(double t, const StateSnapshot& state) {
+bool MpcNode::sendForces(double t, const StateSnapshot& state) {
   const adroit_mpc::PlanPolicy& plan = policies_.front();
   // A policy older than its horizon says nothing about now (after a stall): send nothing.
   const double age = t - plan.policy.t0;
-  if (age > horizon_.load(std::memory_order_relaxed)) return;
+  if (age > horizon_.load(std::memory_order_relaxed)) return false;
   plan.action(t, state.qpos.data(), state.qvel.data(), state.act.data(), ctrl_.data(), params_.feedback_scale);
   for (std::size_t i = 0; i < ctrl_.size(); ++i) {
-    if (!std::isfinite(ctrl_[i])) return;  // the driver would reject it; keep silent, count below
+    if (!std::isfinite(ctrl_[i])) return false;  // the driver would reject it
     force_msg_.force[i] = std::max(0.0, ctrl_[i]);
   }
   force_msg_.header.stamp = rosTime(t);
@@ -283,6 +283,7 @@ void MpcNode::sendForces(double t, const StateSnapshot& state) {
     window_.age_max = std::max(window_.age_max, age);
     ++window_.age_samples;
   }
+  return true;
 }
 
 void MpcNode::controlLoop() {
@@ -310,9 +311,10 @@ void MpcNode::controlLoop() {
 
 // --- lockstep --------------------------------------------------------------------------------
 
-bool MpcNode::callStep(std::uint32_t steps, double* sim_time) {
+bool MpcNode::callStep(std::uint32_t steps, double command_time, double* sim_time) {
   adroit_msgs::Step srv;
   srv.request.steps = steps;
+  if (command_time >= 0) srv.request.command_stamp = rosTime(command_time);
   if (!step_client_.call(srv) || !srv.response.success) {
     lockstep_failures_.fetch_add(1, std::memory_order_relaxed);
     ROS_ERROR_THROTTLE(1.0, "adroit_mpc: lockstep: /adroit/step failed: %s", srv.response.message.c_str());
@@ -324,9 +326,20 @@ bool MpcNode::callStep(std::uint32_t steps, double* sim_time) {
 
 bool MpcNode::waitForState(double sim_time, StateSnapshot& out) {
   // The driver answers a step once its states are published; they may still be on the wire.
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+  // Joint states and odometry come on separate connections: both must have caught up. An
+  // object stream slower than the joint states never does; then the joints decide, after a
+  // grace period, and the run is no longer exactly reproducible (said once).
+  const auto start = std::chrono::steady_clock::now();
+  const auto deadline = start + std::chrono::seconds(2), grace = start + std::chrono::milliseconds(50);
   while (running_ && ros::ok() && std::chrono::steady_clock::now() < deadline) {
-    if (latestState(out) && rosTime(out.time).toSec() >= sim_time - 1e-6) return true;
+    if (latestState(out) && rosTime(out.time).toSec() >= sim_time - 1e-6) {
+      if (object_qpos_ < 0 || rosTime(out.object_time).toSec() >= sim_time - 1e-6) return true;
+      if (std::chrono::steady_clock::now() > grace) {
+        ROS_WARN_ONCE("adroit_mpc: lockstep: object odometry lags the joint states (driver object_rate below "
+                      "joint_state_rate?): planning on the newest odometry, the run is not exactly reproducible");
+        return true;
+      }
+    }
     std::this_thread::sleep_for(std::chrono::microseconds(100));
   }
   return false;
@@ -350,7 +363,7 @@ void MpcNode::lockstepLoop() {
   while (running_ && ros::ok()) {
     if (!have_state) {
       // A state at the current simulated time (a paused driver publishes none by itself).
-      have_state = callStep(1, &sim_time) && waitForState(sim_time, plan_state_);
+      have_state = callStep(1, -1, &sim_time) && waitForState(sim_time, plan_state_);
       if (!have_state) {
         std::this_thread::sleep_for(std::chrono::milliseconds(100));
         continue;
@@ -360,17 +373,15 @@ void MpcNode::lockstepLoop() {
     if (planned && !params_.force_mode) sendForceReference(plan_state_.time);
     policies_.update();
     control_state_.time = plan_state_.time;
+    control_state_.object_time = plan_state_.object_time;
     control_state_.serial = plan_state_.serial;
     control_state_.qpos = plan_state_.qpos;  // same sizes: copies, no allocation
     control_state_.qvel = plan_state_.qvel;
     control_state_.act = plan_state_.act;
     for (int c = 0; c < params_.lockstep_controls_per_plan && running_; ++c) {
-      if (params_.force_mode && policies_.hasPolicy()) {
-        sendForces(control_state_.time, control_state_);
-        // The command travels on its own connection; give it time to arrive before the step.
-        std::this_thread::sleep_for(std::chrono::microseconds(300));
-      }
-      if (!callStep(static_cast<std::uint32_t>(steps_per_control), &sim_time) ||
+      // The command travels on its own topic: the driver steps once it has arrived.
+      const bool sent = params_.force_mode && policies_.hasPolicy() && sendForces(control_state_.time, control_state_);
+      if (!callStep(static_cast<std::uint32_t>(steps_per_control), sent ? control_state_.time : -1, &sim_time) ||
           !waitForState(sim_time, control_state_)) {
         have_state = false;
         publishing_ = false;
@@ -380,6 +391,7 @@ void MpcNode::lockstepLoop() {
     }
     if (!have_state) continue;
     plan_state_.time = control_state_.time;
+    plan_state_.object_time = control_state_.object_time;
     plan_state_.serial = control_state_.serial;
     plan_state_.qpos = control_state_.qpos;
     plan_state_.qvel = control_state_.qvel;

@@ -81,6 +81,7 @@ MpcParams readParams(const ros::NodeHandle& pnh);
 // The planning model's state assembled from the driver's topics.
 struct StateSnapshot {
   double time = 0;  // node time (s since the node's time origin) of the joint state
+  double object_time = -1;  // node time of the object odometry (-1: none yet or no object)
   std::vector<double> qpos, qvel, act;
   std::uint64_t serial = 0;  // joint states accepted so far
 };
@@ -152,9 +153,11 @@ class MpcNode {
   void lockstepLoop();
   // One optimisation on `state`; true when a new policy was published.
   bool planOnce(const StateSnapshot& state);
-  void sendForces(double t, const StateSnapshot& state);
+  // True when a command was published (a fresh enough policy with finite output).
+  bool sendForces(double t, const StateSnapshot& state);
   void sendForceReference(double t);
-  bool callStep(std::uint32_t steps, double* sim_time);
+  // command_time >= 0: the driver steps once the command stamped then has arrived.
+  bool callStep(std::uint32_t steps, double command_time, double* sim_time);
   bool waitForState(double sim_time, StateSnapshot& out);
   void publishEvents(const std::vector<adroit_mpc::TaskEvent>& events);
 

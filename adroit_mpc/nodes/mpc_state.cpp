@@ -120,6 +120,7 @@ void MpcNode::onOdometry(const nav_msgs::Odometry::ConstPtr& msg) {
   std::copy(quat, quat + 4, qpos + 3);
   std::copy(linear_world, linear_world + 3, qvel);
   qvel[3] = w.x, qvel[4] = w.y, qvel[5] = w.z;
+  if (time_origin_set_ && !m.header.stamp.isZero()) incoming_.object_time = nodeTime(m.header.stamp);
   object_seen_ = true;
   odom_accepted_.fetch_add(1, std::memory_order_relaxed);
 }
@@ -128,6 +129,7 @@ bool MpcNode::latestState(StateSnapshot& out) {
   std::lock_guard<std::mutex> lock(state_mutex_);
   if (!joints_seen_ || (object_qpos_ >= 0 && !object_seen_)) return false;
   out.time = incoming_.time;
+  out.object_time = incoming_.object_time;
   out.serial = incoming_.serial;
   std::copy(incoming_.qpos.begin(), incoming_.qpos.end(), out.qpos.begin());
   std::copy(incoming_.qvel.begin(), incoming_.qvel.end(), out.qvel.begin());

@@ -11,6 +11,7 @@ void setKnotState(const mjModel* m, mjData* d, const Eigen::VectorXd& state, con
   mju_copy(d->qvel, state.data() + m->nq, m->nv);
   if (m->na) mju_copy(d->act, state.data() + m->nq + m->nv, m->na);
   mju_copy(d->ctrl, ctrl.data(), m->nu);
+  mju_zero(d->qacc_warmstart, m->nv);  // cold, as in rollout(): independent of the worker's history
   d->time = time;
 }
 

@@ -193,6 +193,9 @@ void rollout(const mjModel* m, const ControlSpace& space, const Eigen::VectorXd&
   mju_copy(d->qpos, initial.data(), m->nq);
   mju_copy(d->qvel, initial.data() + m->nq, m->nv);
   if (m->na) mju_copy(d->act, initial.data() + m->nq + m->nv, m->na);
+  // The constraint solver starts cold: a worker's leftover warm start from another rollout
+  // would make results depend on which worker ran what.
+  mju_zero(d->qacc_warmstart, m->nv);
   out.total = 0;
   for (int t = 0; t <= T; ++t) {
     out.times[t] = t0 + t * m->opt.timestep;

@@ -23,6 +23,7 @@ run rosrun adroit_description scene_report --testspeed --seconds 10
 run rosrun adroit_pneumatics pneumatics_bench
 run rosrun adroit_pneumatics scalar_vs_core_bench
 run rosrun adroit_mpc mpc_timing
+run rosrun adroit_mpc mpc_success --out "$WS_ROOT/log/bench" --latency-sweep 0.01,0.03,0.05
 run rosrun adroit_driver run_bench.sh ball 5 10
 run bash "$WS_ROOT/launch/bench/watchdog_under_load.sh" 60
 echo "== summary =="

@@ -1,0 +1,408 @@
+// Behaviour MPC success over randomised trials (issue: catch >= 80 %, relocation within 3 cm
+// >= 80 %, typing >= 90 % of keys), iLQG against predictive sampling and synergies on / off on
+// identical trials. A program, not a test.
+//
+//   mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,nosyn]
+//               [--out DIR] [--seed S] [--fixed-latency S] [--latency-sweep S,S,...]
+//
+// --latency-sweep: iLQG on the first task again with each fixed planning latency (simulated
+// s per optimisation instead of the measured wall time): how fast the planner must be.
+//
+// Closed loop in emulated real time, ROS-free: the simulation runs the physical scene (2 ms
+// steps, actuators driven by tendon force = force mode); the planner plans on the planning
+// model from the simulated state. An optimisation that took c seconds of wall time on this
+// machine is applied c seconds of simulated time after the state it started from, and the
+// previous policy runs in between (exactly what the node's planner thread does against a
+// driver running in real time, with the cores to itself). The planner optimises ten times
+// before the trial starts (the MPC runs before the object is released).
+//
+// Trials (seeded; every variant sees the same ones):
+//   catch     bottle released 4-9 cm above the goal, +-1.5 cm sideways; 2.5 s; success: it
+//             never falls below the palm (z >= 0.2 m) and ends within 3 cm of the goal;
+//   relocate  ball start +-2 cm on the table, goal in a box in reach; 4 s; success: the ball
+//             ends within 3 cm of the goal;
+//   type      a random 10-digit sequence; until typed or 1.5 s per key; keys correct = keys
+//             typed correctly (auto-correction allowed), speed = correct keys per minute.
+//
+// Writes DIR/success_trials.csv (one row per trial), DIR/success_traces.csv (the first trial
+// of each task and variant, error over time) and plots them with plot_success.py into
+// DIR/success_<task>.png. Ends with RESULT lines (DESIGN.md section 5).
+#include <adroit_core/mujoco_model.h>
+#include <adroit_core/timing_stats.h>
+#include <adroit_description/scenes.h>
+#include <adroit_mpc/planner.h>
+#include <adroit_mpc/planning_model.h>
+#include <adroit_mpc/synergies.h>
+#include <adroit_mpc/task.h>
+#include <adroit_mpc/task_params.h>
+#include <adroit_mpc/type_task.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <map>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+using namespace adroit_mpc;
+
+namespace {
+
+// Optimisations before the trial starts: the MPC runs while the object is held (0.5 s at
+// ~50 ms per iteration).
+constexpr int kWarmupIterations = 10;
+
+struct Variant {
+  std::string name, planner;
+  bool synergies;
+};
+
+struct TrialSpec {
+  int index = 0;
+  Eigen::Vector3d object_start = Eigen::Vector3d::Zero();
+  Eigen::Vector3d goal = Eigen::Vector3d::Zero();
+  std::string keys;
+};
+
+struct TrialResult {
+  bool success = false;
+  double final_error = 0, lowest_z = 0, duration = 0, plan_ms_median = 0;
+  int keys_correct = 0, keys_total = 0, diverged = 0;
+  std::vector<std::pair<double, double>> trace;  // (t, error)
+};
+
+std::string sceneOf(const std::string& task) {
+  return task == "catch" ? "bottle" : task == "relocate" ? "ball" : "keypad";
+}
+
+std::vector<TrialSpec> makeTrials(const std::string& task, int n, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1, 1);
+  const TaskParams defaults = defaultTaskParams(task);
+  std::vector<TrialSpec> trials(n);
+  for (int i = 0; i < n; ++i) {
+    TrialSpec& s = trials[i];
+    s.index = i;
+    if (task == "catch") {
+      const Eigen::Vector3d goal = paramVector3(task, defaults, "goal_position");
+      s.goal = goal;
+      s.object_start = goal + Eigen::Vector3d(0.015 * u(rng), 0.015 * u(rng), 0.065 + 0.025 * u(rng));
+    } else if (task == "relocate") {
+      const Eigen::Vector3d start = paramVector3(task, defaults, "object_start_position");
+      s.object_start = start + Eigen::Vector3d(0.02 * u(rng), -0.02 * std::abs(u(rng)), 0);
+      s.goal = Eigen::Vector3d(0.08 * u(rng), -0.25 + 0.04 * u(rng), 0.12 + 0.05 * u(rng));
+    } else {
+      std::uniform_int_distribution<int> digit(0, 9);
+      for (int k = 0; k < 10; ++k) s.keys.push_back(static_cast<char>('0' + digit(rng)));
+    }
+  }
+  return trials;
+}
+
+void placeObject(const mjModel* m, mjData* d, const Eigen::Vector3d& p) {
+  const int j = mj_name2id(m, mjOBJ_JOINT, "object_root");
+  if (j < 0) return;
+  double* q = d->qpos + m->jnt_qposadr[j];
+  q[0] = p.x(), q[1] = p.y(), q[2] = p.z();
+  q[3] = 1, q[4] = q[5] = q[6] = 0;
+  mju_zero(d->qvel + m->jnt_dofadr[j], 6);
+}
+
+class TrialRunner {
+ public:
+  TrialRunner(const std::string& task, const Variant& variant) : task_name_(task), variant_(variant) {
+    const TaskParams defaults = defaultTaskParams(task);
+    settings_.horizon = paramNumber(task, defaults, "horizon", 0.01, 5);
+    settings_.dt = paramNumber(task, defaults, "planner_dt", 1e-4, 0.1);
+    settings_.synergies = variant.synergies;
+    PlanningModelSettings ms;
+    ms.timestep = settings_.dt;
+    if (task == "type") ms.contact_margin = 0.001, ms.contact_softness = 0.001;  // as the node
+    const std::string share = descriptionShareDir();
+    plan_model_ = loadPlanningModel(adroit::description::sceneFile(share, sceneOf(task), true), ms);
+    sim_model_ = adroit::loadModelFile(adroit::description::sceneFile(share, sceneOf(task), false)).model;
+    sim_ = adroit::makeData(sim_model_.get());
+    observe_ = adroit::makeData(plan_model_.get());
+    object_body_ = mj_name2id(sim_model_.get(), mjOBJ_BODY, "object");
+    duration_ = task == "catch" ? 2.5 : task == "relocate" ? 4.0 : 15.0;
+  }
+
+  TrialResult run(const TrialSpec& spec) {
+    const mjModel* m = sim_model_.get();
+    mjData* d = sim_.get();
+    const int rest = mj_name2id(m, mjOBJ_KEY, "rest");
+    if (rest >= 0) mj_resetDataKeyframe(m, d, rest);
+    else mj_resetData(m, d);
+    TaskParams params;
+    if (task_name_ == "catch" || task_name_ == "relocate") {
+      placeObject(m, d, spec.object_start);
+      params.vectors["goal_position"] = {spec.goal.x(), spec.goal.y(), spec.goal.z()};
+    }
+    mj_forward(m, d);
+    auto task = makeTask(task_name_, params);
+    task->bind(plan_model_.get(), variant_.synergies ? Synergies::kCount : 0);
+    std::string why;
+    if (!spec.keys.empty() && !task->setSequence(spec.keys, &why)) throw std::runtime_error(why);
+    auto planner = makePlanner(variant_.planner);
+    planner->initialize(plan_model_.get(), *task, settings_);
+
+    TrialResult r;
+    r.lowest_z = 1e9;
+    std::vector<double> plan_seconds;
+    PlanPolicy active, fresh;
+    bool have_policy = false;
+    PlannerState state;
+    const double duration = task_name_ == "type" ? 1.5 * spec.keys.size() + 0.5 : duration_;
+    int warmup = kWarmupIterations;
+    while (d->time < duration) {
+      // The state the optimisation starts from; the task's progress observed on it.
+      state.time = d->time;
+      state.qpos.assign(d->qpos, d->qpos + m->nq);
+      state.qvel.assign(d->qvel, d->qvel + m->nv);
+      state.act.assign(d->act, d->act + m->na);
+      observeState(*task, state);
+      planner->setTask(*task);
+      planner->setState(state);
+      adroit::Stopwatch clock;
+      const OptimizeReport report = planner->optimize();
+      const double latency = fixed_latency_ >= 0 ? fixed_latency_ : clock.elapsed();
+      plan_seconds.push_back(latency);
+      if (report.diverged) ++r.diverged;
+      else planner->policy(fresh);
+      if (warmup > 0) {  // before the release: the world waits
+        --warmup;
+        std::swap(active, fresh);
+        have_policy = !report.diverged;
+        continue;
+      }
+      // The previous policy runs while this optimisation computes.
+      const double switch_time = d->time + latency;
+      while (d->time < switch_time && d->time < duration) stepOnce(active, have_policy, *task, r);
+      if (!report.diverged) {
+        std::swap(active, fresh);
+        have_policy = true;
+      }
+      if (task_name_ == "type" && task->error(plan_model_.get(), observe_.get()) == 0) break;
+    }
+    r.duration = d->time;
+    r.plan_ms_median = 1e3 * adroit::percentile(plan_seconds, 50);
+    if (task_name_ == "type") {
+      auto& type = static_cast<TypeTask&>(*task);
+      r.keys_total = static_cast<int>(spec.keys.size());
+      r.keys_correct = type.typedCorrectly();
+      r.final_error = r.keys_total - r.keys_correct;
+      r.success = r.keys_correct == r.keys_total;
+    } else {
+      r.final_error = task->error(m, d);
+      r.success = r.final_error <= 0.03 && (task_name_ != "catch" || r.lowest_z >= 0.2);
+    }
+    return r;
+  }
+
+ private:
+  void observeState(Task& task, const PlannerState& s) {
+    const mjModel* pm = plan_model_.get();
+    mjData* o = observe_.get();
+    o->time = s.time;
+    mju_copy(o->qpos, s.qpos.data(), pm->nq);
+    mju_copy(o->qvel, s.qvel.data(), pm->nv);
+    if (pm->na) mju_copy(o->act, s.act.data(), pm->na);
+    mj_forward(pm, o);
+    task.observe(pm, o, s.time);
+  }
+
+  void stepOnce(const PlanPolicy& policy, bool have_policy, Task& task, TrialResult& r) {
+    const mjModel* m = sim_model_.get();
+    mjData* d = sim_.get();
+    if (have_policy) policy.action(d->time, d->qpos, d->qvel, d->act, d->ctrl);
+    else mju_zero(d->ctrl, m->nu);
+    mj_step(m, d);
+    if (task_name_ == "type") {  // key presses are registered at the control rate, as the node does
+      if (++steps_since_observe_ >= 3) {
+        steps_since_observe_ = 0;
+        PlannerState s;
+        s.time = d->time;
+        s.qpos.assign(d->qpos, d->qpos + m->nq);
+        s.qvel.assign(d->qvel, d->qvel + m->nv);
+        s.act.assign(d->act, d->act + m->na);
+        observeState(task, s);
+      }
+    } else if (object_body_ >= 0) {
+      r.lowest_z = std::min(r.lowest_z, d->xpos[3 * object_body_ + 2]);
+    }
+    if (d->time >= next_trace_) {
+      next_trace_ = d->time + 0.02;
+      r.trace.emplace_back(d->time, task_name_ == "type" ? task.error(plan_model_.get(), observe_.get()) : task.error(m, d));
+    }
+  }
+
+ public:
+  void resetTrace() { next_trace_ = 0; }
+  // >= 0: every optimisation takes this long in simulated time (instead of its wall time).
+  void setFixedLatency(double seconds) { fixed_latency_ = seconds; }
+
+ private:
+  std::string task_name_;
+  Variant variant_;
+  PlannerSettings settings_;
+  adroit::ModelPtr plan_model_, sim_model_;
+  adroit::DataPtr sim_, observe_;
+  int object_body_ = -1;
+  double duration_ = 0, next_trace_ = 0, fixed_latency_ = -1;
+  int steps_since_observe_ = 0;
+};
+
+std::vector<std::string> split(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream in(s);
+  std::string item;
+  while (std::getline(in, item, ',')) if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int trials = 20;
+  unsigned seed = 1;
+  double fixed_latency = -1;
+  std::vector<std::string> sweep;  // fixed latencies [s] for iLQG on the first task
+  std::string out_dir = ".", tasks_arg = "catch,relocate,type", variants_arg = "ilqg,sampling,nosyn";
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--trials" && i + 1 < argc) trials = std::atoi(argv[++i]);
+    else if (a == "--tasks" && i + 1 < argc) tasks_arg = argv[++i];
+    else if (a == "--variants" && i + 1 < argc) variants_arg = argv[++i];
+    else if (a == "--out" && i + 1 < argc) out_dir = argv[++i];
+    else if (a == "--seed" && i + 1 < argc) seed = static_cast<unsigned>(std::atoi(argv[++i]));
+    else if (a == "--fixed-latency" && i + 1 < argc) fixed_latency = std::atof(argv[++i]);
+    else if (a == "--latency-sweep" && i + 1 < argc) sweep = split(argv[++i]);
+    else {
+      std::fprintf(stderr,
+                   "usage: mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,nosyn] "
+                   "[--out DIR] [--seed S] [--fixed-latency S] [--latency-sweep S,S,...]\n");
+      return 2;
+    }
+  }
+  if (trials < 1) {
+    std::fprintf(stderr, "mpc_success: --trials must be at least 1\n");
+    return 2;
+  }
+  const std::map<std::string, Variant> known = {{"ilqg", {"ilqg", "ilqg", true}},
+                                                {"sampling", {"sampling", "sampling", true}},
+                                                {"nosyn", {"nosyn", "ilqg", false}}};
+  std::vector<Variant> variants;
+  for (const auto& v : split(variants_arg)) {
+    if (!known.count(v)) {
+      std::fprintf(stderr, "mpc_success: unknown variant '%s' (known: ilqg, sampling, nosyn)\n", v.c_str());
+      return 2;
+    }
+    variants.push_back(known.at(v));
+  }
+  const std::vector<std::string> tasks = split(tasks_arg);
+  for (const auto& t : tasks) {
+    if (t != "catch" && t != "relocate" && t != "type") {
+      std::fprintf(stderr, "mpc_success: unknown task '%s' (known: catch, relocate, type)\n", t.c_str());
+      return 2;
+    }
+  }
+
+  std::ofstream trials_csv(out_dir + "/success_trials.csv"), traces_csv(out_dir + "/success_traces.csv");
+  if (!trials_csv || !traces_csv) {
+    std::fprintf(stderr, "mpc_success: cannot write into %s\n", out_dir.c_str());
+    return 2;
+  }
+  trials_csv << "task,variant,trial,success,final_error,lowest_z,keys_correct,keys_total,duration,plan_ms,diverged\n";
+  traces_csv << "task,variant,t,error\n";
+  std::printf("Behaviour MPC success, %d trial(s) per task, emulated real time on this machine (seed %u)\n\n", trials,
+              seed);
+  std::printf("%-9s %-9s %9s %12s %12s %10s %9s\n", "task", "variant", "success", "mean error", "keys/min",
+              "plan ms", "diverged");
+  std::map<std::string, std::map<std::string, double>> rate, keys_rate, speed;
+  for (const auto& task : tasks) {
+    const auto specs = makeTrials(task, trials, seed);
+    for (const auto& variant : variants) {
+      TrialRunner runner(task, variant);
+      runner.setFixedLatency(fixed_latency);
+      int ok = 0, diverged = 0, keys_ok = 0, keys_all = 0;
+      double error_sum = 0, typing_time = 0;
+      std::vector<double> plan_ms;
+      for (const auto& spec : specs) {
+        runner.resetTrace();
+        const TrialResult r = runner.run(spec);
+        ok += r.success;
+        diverged += r.diverged;
+        error_sum += r.final_error;
+        keys_ok += r.keys_correct;
+        keys_all += r.keys_total;
+        typing_time += r.duration;
+        plan_ms.push_back(r.plan_ms_median);
+        trials_csv << task << "," << variant.name << "," << spec.index << "," << r.success << "," << r.final_error << ","
+                   << (r.lowest_z > 1e8 ? 0 : r.lowest_z) << "," << r.keys_correct << "," << r.keys_total << ","
+                   << r.duration << "," << r.plan_ms_median << "," << r.diverged << "\n";
+        if (spec.index == 0)
+          for (const auto& [t, e] : r.trace) traces_csv << task << "," << variant.name << "," << t << "," << e << "\n";
+        std::fflush(stdout);
+      }
+      rate[task][variant.name] = static_cast<double>(ok) / specs.size();
+      if (task == "type") {
+        keys_rate[task][variant.name] = keys_all ? static_cast<double>(keys_ok) / keys_all : 0;
+        speed[task][variant.name] = typing_time > 0 ? 60.0 * keys_ok / typing_time : 0;
+      }
+      std::printf("%-9s %-9s %5d/%-3zu %12.4f %12s %10.1f %9d\n", task.c_str(), variant.name.c_str(), ok, specs.size(),
+                  error_sum / specs.size(),
+                  task == "type" ? std::to_string(static_cast<int>(std::lround(speed[task][variant.name]))).c_str() : "-",
+                  adroit::percentile(plan_ms, 50), diverged);
+      std::fflush(stdout);
+    }
+  }
+  if (!sweep.empty() && !tasks.empty()) {
+    const std::string& task = tasks.front();
+    const auto specs = makeTrials(task, trials, seed);
+    std::printf("\n%s, iLQG, success against a fixed planning latency (simulated s per optimisation):\n",
+                task.c_str());
+    TrialRunner runner(task, known.at("ilqg"));
+    for (const auto& value : sweep) {
+      const double latency = std::atof(value.c_str());
+      runner.setFixedLatency(latency);
+      int ok = 0;
+      for (const auto& spec : specs) {
+        runner.resetTrace();
+        const TrialResult r = runner.run(spec);
+        ok += r.success;
+        trials_csv << task << ",latency_" << value << "," << spec.index << "," << r.success << "," << r.final_error
+                   << "," << (r.lowest_z > 1e8 ? 0 : r.lowest_z) << "," << r.keys_correct << "," << r.keys_total << ","
+                   << r.duration << "," << 1e3 * latency << "," << r.diverged << "\n";
+      }
+      std::printf("  latency %5.0f ms: %d/%zu\n", 1e3 * latency, ok, specs.size());
+      std::fflush(stdout);
+    }
+  }
+  trials_csv.close();
+  traces_csv.close();
+
+  // plot_success.py is installed next to this program.
+  const std::string script = std::filesystem::read_symlink("/proc/self/exe").parent_path() / "plot_success.py";
+  const std::string plot = "python3 \"" + script + "\" \"" + out_dir + "\"";
+  if (std::system(plot.c_str()) != 0) std::printf("\n(plotting failed: %s)\n", plot.c_str());
+  else std::printf("\nplots: %s/success_<task>.png\n", out_dir.c_str());
+
+  std::printf("\n");
+  const auto result = [](const std::string& name, double value, const char* unit, const char* op, double target) {
+    const bool pass = std::strcmp(op, ">=") == 0 ? value >= target : value <= target;
+    std::printf("RESULT adroit_mpc/%s %.2f %s target %s %.2f %s\n", name.c_str(), value, unit, op, target,
+                pass ? "PASS" : "FAIL");
+  };
+  if (std::any_of(variants.begin(), variants.end(), [](const Variant& v) { return v.name == "ilqg"; })) {
+    if (rate.count("catch")) result("catch_success_rate", rate["catch"]["ilqg"], "ratio", ">=", 0.8);
+    if (rate.count("relocate")) result("relocate_success_rate", rate["relocate"]["ilqg"], "ratio", ">=", 0.8);
+    if (keys_rate.count("type")) result("typing_keys_correct_rate", keys_rate["type"]["ilqg"], "ratio", ">=", 0.9);
+  }
+  return 0;
+}

@@ -86,6 +86,7 @@ MpcNode::MpcNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   reference_msg_.dt = params_.settings.dt;
   const int max_knots = static_cast<int>(std::ceil(2.0 / params_.settings.dt)) + 2;  // the reconfigure limit
   reference_msg_.force.reserve(static_cast<std::size_t>(max_knots) * m->nu);
+  reference_values_.assign(static_cast<std::size_t>(max_knots) * m->nu, 0.0);
 
   ros::NodeHandle mpc(nh_, "/adroit/mpc");
   force_pub_ = nh_.advertise<adroit_msgs::TendonForceCommand>("/adroit/tendon_force_command", 10);
@@ -141,7 +142,7 @@ void MpcNode::start() {
     planner_thread_ = std::thread(&MpcNode::lockstepLoop, this);
   } else {
     planner_thread_ = std::thread(&MpcNode::plannerLoop, this);
-    if (params_.force_mode) control_thread_ = std::thread(&MpcNode::controlLoop, this);
+    control_thread_ = std::thread(&MpcNode::controlLoop, this);
   }
   ROS_INFO("adroit_mpc: task %s, planner %s, %s mode%s, horizon %.3f s at dt %.4f s, %d iteration(s), synergies %s, "
            "model %s",
@@ -223,7 +224,7 @@ void MpcNode::plannerLoop() {
       std::this_thread::sleep_for(std::chrono::milliseconds(1));
       continue;
     }
-    if (planOnce(plan_state_) && !params_.force_mode) sendForceReference(nodeTime(ros::Time::now()));
+    planOnce(plan_state_);
   }
 }
 
@@ -239,43 +240,18 @@ void MpcNode::publishEvents(const std::vector<adroit_mpc::TaskEvent>& events) {
   }
 }
 
-void MpcNode::sendForceReference(double t) {
-  // The best trajectory's tensions from the knot at or before now to the horizon's end:
-  // the pools track the future, not just the present (thesis 7.4).
-  const adroit_mpc::Trajectory& plan = planner_->bestTrajectory();
-  const std::size_t knots = std::min(plan.ctrl.size(), plan.times.size());
-  if (knots == 0) return;
-  std::size_t k0 = 0;
-  while (k0 + 1 < knots && plan.times[k0 + 1] <= t) ++k0;
-  const std::size_t steps = knots - k0, nu = actuator_names_.size();
-  reference_msg_.header.stamp = rosTime(plan.times[k0]);
-  reference_msg_.dt = params_.settings.dt;
-  reference_msg_.steps = static_cast<std::uint32_t>(steps);
-  reference_msg_.force.resize(steps * nu);
-  for (std::size_t k = 0; k < steps; ++k) {
-    const Eigen::VectorXd& u = plan.ctrl[k0 + k];
-    for (std::size_t j = 0; j < nu; ++j) reference_msg_.force[k * nu + j] = std::max(0.0, u[j]);
-  }
-  reference_pub_.publish(reference_msg_);
-  references_sent_.fetch_add(1, std::memory_order_relaxed);
-  publishing_ = true;
-}
-
 // --- control ---------------------------------------------------------------------------------
 
-bool MpcNode::sendForces(double t, const StateSnapshot& state) {
-  const adroit_mpc::PlanPolicy& plan = policies_.front();
+bool MpcNode::policyUsable(double t, double* age) const {
   // A policy older than its horizon says nothing about now (after a stall): send nothing.
-  const double age = t - plan.policy.t0;
-  if (age > horizon_.load(std::memory_order_relaxed)) return false;
-  plan.action(t, state.qpos.data(), state.qvel.data(), state.act.data(), ctrl_.data(), params_.feedback_scale);
-  for (std::size_t i = 0; i < ctrl_.size(); ++i) {
-    if (!std::isfinite(ctrl_[i])) return false;  // the driver would reject it
-    force_msg_.force[i] = std::max(0.0, ctrl_[i]);
-  }
-  force_msg_.header.stamp = rosTime(t);
-  force_pub_.publish(force_msg_);
-  commands_sent_.fetch_add(1, std::memory_order_relaxed);
+  *age = t - policies_.front().policy.t0;
+  return *age <= horizon_.load(std::memory_order_relaxed);
+}
+
+bool MpcNode::sendCommand(double t, const StateSnapshot& state) {
+  double age = 0;
+  if (!policyUsable(t, &age)) return false;
+  if (!(params_.force_mode ? sendForces(t, state) : sendPolicyReference(t, state))) return false;
   publishing_ = true;
   std::unique_lock<std::mutex> lock(stats_mutex_, std::try_to_lock);  // never waits
   if (lock.owns_lock()) {
@@ -283,6 +259,40 @@ bool MpcNode::sendForces(double t, const StateSnapshot& state) {
     window_.age_max = std::max(window_.age_max, age);
     ++window_.age_samples;
   }
+  return true;
+}
+
+bool MpcNode::sendForces(double t, const StateSnapshot& state) {
+  policies_.front().action(t, state.qpos.data(), state.qvel.data(), state.act.data(), ctrl_.data(),
+                           params_.feedback_scale);
+  for (std::size_t i = 0; i < ctrl_.size(); ++i) {
+    if (!std::isfinite(ctrl_[i])) return false;  // the driver would reject it
+    force_msg_.force[i] = std::max(0.0, ctrl_[i]);
+  }
+  force_msg_.header.stamp = rosTime(t);
+  force_pub_.publish(force_msg_);
+  commands_sent_.fetch_add(1, std::memory_order_relaxed);
+  return true;
+}
+
+bool MpcNode::sendPolicyReference(double t, const StateSnapshot& state) {
+  // The pools track the future, not just the present (thesis 7.4): the policy from now to its
+  // horizon's end, with the feedback on the deviation measured now (PlanPolicy::reference).
+  const adroit_mpc::PlanPolicy& plan = policies_.front();
+  const std::size_t nu = actuator_names_.size();
+  const int max_samples = static_cast<int>(reference_values_.size() / nu);
+  const int samples = plan.reference(t, state.qpos.data(), state.qvel.data(), state.act.data(), max_samples,
+                                     reference_values_.data(), params_.feedback_scale);
+  const std::size_t n = static_cast<std::size_t>(samples) * nu;
+  for (std::size_t i = 0; i < n; ++i)
+    if (!std::isfinite(reference_values_[i])) return false;  // the pools would reject it
+  reference_msg_.header.stamp = rosTime(t);
+  reference_msg_.dt = plan.policy.dt;
+  reference_msg_.steps = static_cast<std::uint32_t>(samples);
+  reference_msg_.force.resize(n);  // within the reserved capacity: no allocation
+  for (std::size_t i = 0; i < n; ++i) reference_msg_.force[i] = std::max(0.0, reference_values_[i]);
+  reference_pub_.publish(reference_msg_);
+  references_sent_.fetch_add(1, std::memory_order_relaxed);
   return true;
 }
 
@@ -305,7 +315,7 @@ void MpcNode::controlLoop() {
     }
     policies_.update();
     if (!policies_.hasPolicy() || !latestState(control_state_)) continue;
-    sendForces(nodeTime(ros::Time::now()), control_state_);
+    sendCommand(nodeTime(ros::Time::now()), control_state_);
   }
 }
 
@@ -369,8 +379,7 @@ void MpcNode::lockstepLoop() {
         continue;
       }
     }
-    const bool planned = planOnce(plan_state_);
-    if (planned && !params_.force_mode) sendForceReference(plan_state_.time);
+    planOnce(plan_state_);
     policies_.update();
     control_state_.time = plan_state_.time;
     control_state_.object_time = plan_state_.object_time;
@@ -380,8 +389,11 @@ void MpcNode::lockstepLoop() {
     control_state_.act = plan_state_.act;
     for (int c = 0; c < params_.lockstep_controls_per_plan && running_; ++c) {
       // The command travels on its own topic: the driver steps once it has arrived.
-      const bool sent = params_.force_mode && policies_.hasPolicy() && sendForces(control_state_.time, control_state_);
-      if (!callStep(static_cast<std::uint32_t>(steps_per_control), sent ? control_state_.time : -1, &sim_time) ||
+      // Pneumatic mode: the reference goes to the pools, whose valve commands the driver
+      // does not wait for.
+      const bool sent = policies_.hasPolicy() && sendCommand(control_state_.time, control_state_);
+      const bool wait = sent && params_.force_mode;
+      if (!callStep(static_cast<std::uint32_t>(steps_per_control), wait ? control_state_.time : -1, &sim_time) ||
           !waitForState(sim_time, control_state_)) {
         have_state = false;
         publishing_ = false;

@@ -153,9 +153,13 @@ class MpcNode {
   void lockstepLoop();
   // One optimisation on `state`; true when a new policy was published.
   bool planOnce(const StateSnapshot& state);
-  // True when a command was published (a fresh enough policy with finite output).
+  // The current policy on `state` at time t: tendon forces (force mode) or the force
+  // reference over the rest of its horizon for the pools (pneumatic mode). False when
+  // nothing was sent (policy older than its horizon, or not finite).
+  bool sendCommand(double t, const StateSnapshot& state);
   bool sendForces(double t, const StateSnapshot& state);
-  void sendForceReference(double t);
+  bool sendPolicyReference(double t, const StateSnapshot& state);
+  bool policyUsable(double t, double* age) const;
   // command_time >= 0: the driver steps once the command stamped then has arrived.
   bool callStep(std::uint32_t steps, double command_time, double* sim_time);
   bool waitForState(double sim_time, StateSnapshot& out);
@@ -220,7 +224,7 @@ class MpcNode {
 
   // Control (control thread or lockstep loop).
   StateSnapshot control_state_;
-  std::vector<double> ctrl_;
+  std::vector<double> ctrl_, reference_values_;
   adroit_msgs::TendonForceCommand force_msg_;
   adroit_msgs::ForceReference reference_msg_;
   ros::Publisher force_pub_, reference_pub_, marker_pub_, diag_pub_, typed_pub_, events_pub_;

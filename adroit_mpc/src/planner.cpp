@@ -17,19 +17,41 @@ void PlanPolicy::bind(const mjModel* m) {
   u_.resize(m->nu);
 }
 
-void PlanPolicy::action(double t, const double* qpos, const double* qvel, const double* act, double* ctrl,
-                        double feedback_scale) const {
-  if (!model_) throw std::logic_error("PlanPolicy::action: bind() the planning model first");
-  if (policy.knots() == 0) throw std::logic_error("PlanPolicy::action: the policy is empty (no plan yet)");
+void PlanPolicy::deviation(double t, const double* qpos, const double* qvel, const double* act) const {
+  if (!model_) throw std::logic_error("PlanPolicy: bind() the planning model first");
+  if (policy.knots() == 0) throw std::logic_error("PlanPolicy: the policy is empty (no plan yet)");
   policy.nominalState(t, x_nominal_);
   stateDifference(model_, x_nominal_.data(), qpos, qvel, act, dx_);
-  policy.action(t, dx_, u_, feedback_scale);
+}
+
+void PlanPolicy::clampInto(double* ctrl) const {
   for (int i = 0; i < model_->nu; ++i) {
     double u = u_[i];
     if (model_->actuator_ctrllimited[i])
       u = std::min(std::max(u, model_->actuator_ctrlrange[2 * i]), model_->actuator_ctrlrange[2 * i + 1]);
     ctrl[i] = u;
   }
+}
+
+void PlanPolicy::action(double t, const double* qpos, const double* qvel, const double* act, double* ctrl,
+                        double feedback_scale) const {
+  deviation(t, qpos, qvel, act);
+  policy.action(t, dx_, u_, feedback_scale);
+  clampInto(ctrl);
+}
+
+int PlanPolicy::reference(double t, const double* qpos, const double* qvel, const double* act, int max_samples,
+                          double* out, double feedback_scale) const {
+  deviation(t, qpos, qvel, act);
+  const double last = policy.t0 + (policy.knots() - 1) * policy.dt;
+  int samples = 0;
+  for (; samples < max_samples; ++samples) {
+    const double ts = t + samples * policy.dt;
+    if (samples > 0 && ts > last + 1e-9) break;
+    policy.action(ts, dx_, u_, feedback_scale);
+    clampInto(out + static_cast<std::size_t>(samples) * model_->nu);
+  }
+  return samples;
 }
 
 // ------------------------------------------------------------------------- shared pieces

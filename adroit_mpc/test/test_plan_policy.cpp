@@ -109,3 +109,34 @@ TEST(PlanPolicy, ActionWithoutAPlanIsAnError) {
   empty.bind(m.get());
   EXPECT_THROW(empty.action(0, qpos.data(), qvel.data(), nullptr, ctrl), std::logic_error);
 }
+
+// PlanPolicy::reference: the deviation measured now, fed back through each later knot's gain.
+TEST(PlanPolicy, ReferenceCarriesTodaysDeviationThroughEachKnotsGain) {
+  auto m = adroit::loadModelString(kFreeBody).model;
+  PlanPolicy p;
+  fillPolicy(m.get(), p, 4);  // knots at 1.0, 1.1, 1.2, 1.3; all at the cart position 0
+  for (int k = 0; k < 4; ++k) {
+    p.policy.u[k] << 1.0 * k, -1.0 * k, 0.0;
+    p.policy.K[k].setZero();
+    p.policy.K[k](0, 6) = 2.0 * (k + 1);  // d u0 / d cart position, different per knot
+  }
+  std::vector<double> qpos(m->qpos0, m->qpos0 + m->nq), qvel(m->nv, 0.0);
+  qpos[7] = 0.5;  // the cart is 0.5 m from the plan's position
+  double out[4 * 3];
+  // From t = 1.1: samples at 1.1, 1.2, 1.3 (the last knot), each u_k + K_k * 0.5.
+  ASSERT_EQ(p.reference(1.1, qpos.data(), qvel.data(), nullptr, 10, out), 3);
+  for (int j = 0; j < 3; ++j) {
+    const int k = j + 1;
+    EXPECT_NEAR(out[3 * j + 0], 1.0 * k + 2.0 * (k + 1) * 0.5, 1e-12) << "sample " << j;
+    EXPECT_NEAR(out[3 * j + 1], -1.0 * k, 1e-12);
+  }
+  // Sample 0 is what the force-mode command would be; max_samples is respected.
+  double ctrl[3];
+  p.action(1.1, qpos.data(), qvel.data(), nullptr, ctrl);
+  EXPECT_NEAR(out[0], ctrl[0], 1e-12);
+  ASSERT_EQ(p.reference(1.0, qpos.data(), qvel.data(), nullptr, 2, out), 2);
+  // Clamped like action(): u0 at knot 3 with feedback is 3 + 8 * 0.5 = 7 < 10; push it over.
+  qpos[7] = 5.0;
+  ASSERT_EQ(p.reference(1.3, qpos.data(), qvel.data(), nullptr, 10, out), 1);
+  EXPECT_EQ(out[0], 10.0);
+}

@@ -62,10 +62,20 @@ class PlanPolicy {
   // ctrl (model nu) at time t from the measured state; allocates nothing.
   void action(double t, const double* qpos, const double* qvel, const double* act, double* ctrl,
               double feedback_scale = 1.0) const;
+  // The policy as a reference for actuators that track one (the pools in pneumatic mode):
+  // sample j, at t + j dt (dt = the policy's knot spacing), is u(t + j dt) + K(t + j dt) dx,
+  // dx = the state measured now minus the plan's: the feedback on today's deviation, carried
+  // along the rest of the plan. Sample 0 is what action() gives. Writes at most max_samples
+  // rows of nu (row-major) up to the policy's last knot; returns how many. Allocates nothing.
+  int reference(double t, const double* qpos, const double* qvel, const double* act, int max_samples, double* out,
+                double feedback_scale = 1.0) const;
   adroit::TvlgPolicy policy;  // x = [qpos qvel act], dx = [dq dv act], u = actuator controls
   double cost = 0;
 
  private:
+  void deviation(double t, const double* qpos, const double* qvel, const double* act) const;  // -> dx_
+  void clampInto(double* ctrl) const;  // u_ within the actuators' ranges
+
   const mjModel* model_ = nullptr;
   mutable Eigen::VectorXd x_nominal_, dx_, u_;
 };

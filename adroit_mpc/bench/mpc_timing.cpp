@@ -20,6 +20,7 @@
 #include <adroit_mpc/planning_model.h>
 #include <adroit_mpc/sampling_planner.h>
 #include <adroit_mpc/task.h>
+#include <adroit_mpc/task_params.h>
 
 #include <cstdio>
 #include <cstdlib>
@@ -200,9 +201,10 @@ std::string readFile(const std::string& path) {
 int main(int argc, char** argv) {
   int iterations = 50;
   bool quick = false;
-  // Defaults as config/mpc.yaml.
-  double dt = 0.01;
-  int skip = 2;
+  // Defaults as shipped: the catch task's planner_dt (config/tasks/catch.yaml) and
+  // derivative_skip of config/mpc.yaml.
+  double dt = paramNumber("catch", defaultTaskParams("catch"), "planner_dt", 1e-4, 0.1);
+  int skip = PlannerSettings().derivative_skip;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--iterations") && i + 1 < argc) iterations = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--dt") && i + 1 < argc) dt = std::atof(argv[++i]);
@@ -227,7 +229,7 @@ int main(int argc, char** argv) {
     // 1. Step and FD knot cost.
     std::printf("Planning model cost per knot (one core)\n");
     std::printf("%-44s %10s %12s\n", "model", "step [us]", "FD knot [ms]");
-    for (double knot_dt : {0.002, 0.005, 0.01}) {
+    for (double knot_dt : {0.002, 0.005, 0.01, 0.02}) {
       for (bool off : {false, true}) {
         PlanningModelSettings s;
         s.timestep = knot_dt;
@@ -293,7 +295,7 @@ int main(int argc, char** argv) {
       struct Choice { double dt; int skip; int threads; bool sensors_off; };
       const Choice choices[] = {{0.005, 1, 0, false}, {0.005, 1, 0, true}, {0.005, 4, 0, true}, {0.005, 6, 0, true},
                                 {0.01, 1, 0, true},    {0.01, 2, 0, false}, {0.01, 2, 1, true}, {0.01, 2, 0, true},
-                                {0.01, 3, 0, true}};
+                                {0.01, 3, 0, true},    {0.02, 1, 0, true},  {0.02, 2, 0, true},  {0.02, 3, 0, true}};
       for (const Choice& c : choices) {
         PlannerSettings p = chosen;
         p.dt = c.dt;

@@ -105,7 +105,7 @@ adroit::ModelPtr loadUnprunedPlanningModel(const std::string& path, const Planni
   return std::move(loaded.model);
 }
 
-std::string descriptionShareDir() {
+std::string packageShareDir(const std::string& package, const std::string& marker) {
   for (const char* variable : {"CMAKE_PREFIX_PATH", "ROS_PACKAGE_PATH"}) {
     const char* value = std::getenv(variable);
     if (!value) continue;
@@ -113,13 +113,15 @@ std::string descriptionShareDir() {
     std::string prefix;
     while (std::getline(list, prefix, ':')) {
       if (prefix.empty()) continue;
-      for (const std::string& dir : {prefix + "/share/adroit_description", prefix + "/adroit_description"})
-        if (std::ifstream(dir + "/scenes.txt").good()) return dir;
+      for (const std::string& dir : {prefix + "/share/" + package, prefix + "/" + package})
+        if (std::ifstream(dir + "/" + marker).good()) return dir;
     }
   }
-  throw std::runtime_error(
-      "adroit_description not found on CMAKE_PREFIX_PATH or ROS_PACKAGE_PATH (source the workspace's setup.bash)");
+  throw std::runtime_error(package + " not found on CMAKE_PREFIX_PATH or ROS_PACKAGE_PATH (source the workspace's "
+                           "setup.bash)");
 }
+
+std::string descriptionShareDir() { return packageShareDir("adroit_description", "scenes.txt"); }
 
 int activeContacts(const mjData* d) {
   int active = 0;

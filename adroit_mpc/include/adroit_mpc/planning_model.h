@@ -48,6 +48,8 @@ adroit::ModelPtr loadUnprunedPlanningModel(const std::string& path, const Planni
 // that holds scenes.txt: where ROS-free programs and tests find the generated models.
 // Throws std::runtime_error naming the variables searched.
 std::string descriptionShareDir();
+// The same for any installed package: the first share/<package> that holds `marker`.
+std::string packageShareDir(const std::string& package, const std::string& marker);
 
 // Contact points of the last collision pass that entered the constraint set (within their
 // margin, not excluded): what the solver pays for.

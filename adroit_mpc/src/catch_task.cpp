@@ -168,7 +168,7 @@ TaskParams CatchTask::defaults() {
                {"w_grasp", 1.0},           {"w_control", 0.1},       {"w_synergy", 0.08},
                {"terminal_scale", 10.0},   {"velocity_angular_scale", 0.03},
                {"position_smoothing", 0.02}, {"grasp_smoothing", 0.02},
-               {"horizon", 0.3},           {"planner_dt", 0.01},
+               {"horizon", 0.3},           {"planner_dt", 0.02},
                {"object_mass", 0.25},      {"object_radius", 0.03}};
   p.vectors = {{"goal_position", {0.007, -0.19, 0.26}},
                {"goal_quat", {1, 0, 0, 0}},

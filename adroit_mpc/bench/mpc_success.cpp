@@ -320,7 +320,9 @@ class TrialRunner {
       const auto verdict = pool_->setState(now, now, robot_->cylinderNames(), sensed.pressure, sensed.length,
                                            sensed.length_rate, sensed.supply_pressure);
       if (!verdict.ok()) throw std::runtime_error("pool rejected the actuator state: " + verdict.detail);
+      adroit::Stopwatch pool_clock;
       const std::vector<double>& volts = pool_->update(now);
+      pool_seconds_.push_back(pool_clock.elapsed());
       robot_->commandValves(pool_->names(), {}, volts);
     }
     if (hold_object) {
@@ -390,6 +392,14 @@ class TrialRunner {
     return force_;
   }
   std::vector<double> reference_, force_;
+  std::vector<double> pool_seconds_;  // wall time of each pool tick (all cylinders)
+
+ public:
+  // Median wall time of a pool tick so far [s] (0 in force mode): the CPU the pools need.
+  std::size_t cylinders() const { return robot_->cylinderNames().size(); }
+  double poolTickMedian() const { return pool_seconds_.empty() ? 0 : adroit::percentile(pool_seconds_, 50); }
+
+ private:
   std::string task_name_;
   Variant variant_;
   PlannerSettings settings_;
@@ -479,7 +489,7 @@ int main(int argc, char** argv) {
   traces_csv << "task,variant,t,error\n";
   std::printf("Behaviour MPC success, %d trial(s) per task, emulated real time on this machine (seed %u)\n\n", trials,
               seed);
-  std::printf("%-9s %-9s %9s %12s %12s %10s %9s\n", "task", "variant", "success", "mean error", "keys/min",
+  std::printf("%-9s %-14s %9s %12s %12s %10s %9s\n", "task", "variant", "success", "mean error", "keys/min",
               "plan ms", "diverged");
   std::map<std::string, std::map<std::string, double>> rate, keys_rate, speed;
   for (const auto& task : tasks) {
@@ -514,10 +524,13 @@ int main(int argc, char** argv) {
         keys_rate[task][variant.name] = keys_all ? static_cast<double>(keys_ok) / keys_all : 0;
         speed[task][variant.name] = typing_time > 0 ? 60.0 * keys_ok / typing_time : 0;
       }
-      std::printf("%-9s %-9s %5d/%-3zu %12.4f %12s %10.1f %9d\n", task.c_str(), variant.name.c_str(), ok, specs.size(),
+      std::printf("%-9s %-14s %5d/%-3zu %12.4f %12s %10.1f %9d\n", task.c_str(), variant.name.c_str(), ok, specs.size(),
                   error_sum / specs.size(),
                   task == "type" ? std::to_string(static_cast<int>(std::lround(speed[task][variant.name]))).c_str() : "-",
                   adroit::percentile(plan_ms, 50), diverged);
+      if (variant.pneumatic)
+        std::printf("%-9s %-14s pools: %.2f ms per 5 ms tick for %zu cylinders (median, one core)\n", "", "",
+                    1e3 * runner.poolTickMedian(), runner.cylinders());
       std::fflush(stdout);
     }
   }

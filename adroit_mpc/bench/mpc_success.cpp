@@ -5,10 +5,12 @@
 //
 //   mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,nosyn,pneumatic]
 //               [--out DIR] [--seed S] [--fixed-latency S] [--latency-sweep S,S,...]
-//               [--dt S] [--horizon S] [--skip K]
+//               [--dt S] [--horizon S] [--skip K] [--sensed]
 //
 // --dt, --horizon, --skip override the task's planner_dt and horizon hints and the iLQG
 // derivative skip (defaults: config/tasks/<task>.yaml, config/mpc.yaml).
+// --sensed: the planner and the policy see the driver's sensed signals (sensor realism: noise,
+// quantisation, delays) instead of the true state, as the node does.
 // --latency-sweep: iLQG on the first task again with each fixed planning latency (simulated
 // s per optimisation instead of the measured wall time): how fast the planner must be.
 //
@@ -201,8 +203,7 @@ class TrialRunner {
     while (d->time < duration) {
       // The state the optimisation starts from; the task's progress observed on it.
       state.time = d->time;
-      state.qpos.assign(d->qpos, d->qpos + m->nq);
-      state.qvel.assign(d->qvel, d->qvel + m->nv);
+      measure(state.qpos, state.qvel);
       state.act.assign(d->act, d->act + m->na);
       observeState(*task, state);
       planner->setTask(*task);
@@ -299,8 +300,9 @@ class TrialRunner {
                 const Eigen::Vector3d* hold_object) {
     const mjModel* m = robot_->model();
     const mjData* d = robot_->data();
+    measure(qpos_, qvel_);
     if (!variant_.pneumatic) {
-      if (have_policy) policy.action(d->time, d->qpos, d->qvel, d->act, ctrl_.data());
+      if (have_policy) policy.action(d->time, qpos_.data(), qvel_.data(), d->act, ctrl_.data());
       else std::fill(ctrl_.begin(), ctrl_.end(), 0.0);
       for (double& u : ctrl_) u = std::isfinite(u) ? std::max(0.0, u) : 0.0;
       robot_->commandForces({}, all_actuators_, ctrl_);
@@ -311,7 +313,7 @@ class TrialRunner {
       if (have_policy && !variant_.open_loop_reference) {
         // As the node's control loop in pneumatic mode: the policy with feedback on the
         // current state, over the rest of its horizon, at the pools' rate.
-        const int samples = policy.reference(d->time, d->qpos, d->qvel, d->act, kMaxReferenceSamples,
+        const int samples = policy.reference(d->time, qpos_.data(), qvel_.data(), d->act, kMaxReferenceSamples,
                                              reference_.data());
         const auto verdict = pool_->setReference(now, now, policy.policy.dt, samples, robot_->cylinderNames(),
                                                  positive(reference_, samples * m->nu));
@@ -381,8 +383,35 @@ class TrialRunner {
   }
   // >= 0: every optimisation takes this long in simulated time (instead of its wall time).
   void setFixedLatency(double seconds) { fixed_latency_ = seconds; }
+  // The planner and the policy see the driver's sensed signals (noise, quantisation, delays)
+  // instead of the true state, as the node does.
+  void setSensed(bool sensed) { sensed_ = sensed; }
 
  private:
+  // The state the controller sees: the true one, or (sensed_) the true one with every 1-DOF
+  // joint and the free object replaced by what the driver's sensors report.
+  void measure(std::vector<double>& qpos, std::vector<double>& qvel) const {
+    const mjModel* m = robot_->model();
+    const mjData* d = robot_->data();
+    qpos.assign(d->qpos, d->qpos + m->nq);
+    qvel.assign(d->qvel, d->qvel + m->nv);
+    if (!sensed_) return;
+    const auto& sensed = robot_->sensed();
+    std::size_t k = 0;
+    for (int j = 0; j < m->njnt; ++j) {
+      if (m->jnt_type[j] == mjJNT_FREE) {
+        std::copy(sensed.object.begin(), sensed.object.begin() + 7, qpos.begin() + m->jnt_qposadr[j]);
+        std::copy(sensed.object.begin() + 7, sensed.object.end(), qvel.begin() + m->jnt_dofadr[j]);
+      } else if (m->jnt_type[j] == mjJNT_HINGE || m->jnt_type[j] == mjJNT_SLIDE) {  // SimulatedRobot's order
+        qpos[m->jnt_qposadr[j]] = sensed.joint_position[k];
+        qvel[m->jnt_dofadr[j]] = sensed.joint_velocity[k];
+        ++k;
+      }
+    }
+  }
+
+  bool sensed_ = false;
+  std::vector<double> qpos_, qvel_;
   static constexpr double kPoolPeriod = 0.005;  // s, the pools' 200 Hz (config/pools.yaml)
   static constexpr int kMaxReferenceSamples = 256;
   // The first n values with negatives clamped to 0 (tendons only pull), in force_.
@@ -431,6 +460,7 @@ int main(int argc, char** argv) {
   int trials = 20;
   unsigned seed = 1;
   double fixed_latency = -1;
+  bool sensed = false;
   std::vector<std::string> sweep;  // fixed latencies [s] for iLQG on the first task
   PlannerSettings overrides;       // horizon, dt <= 0: the task's hints
   overrides.horizon = overrides.dt = -1;
@@ -444,6 +474,7 @@ int main(int argc, char** argv) {
     else if (a == "--seed" && i + 1 < argc) seed = static_cast<unsigned>(std::atoi(argv[++i]));
     else if (a == "--fixed-latency" && i + 1 < argc) fixed_latency = std::atof(argv[++i]);
     else if (a == "--latency-sweep" && i + 1 < argc) sweep = split(argv[++i]);
+    else if (a == "--sensed") sensed = true;
     else if (a == "--dt" && i + 1 < argc) overrides.dt = std::atof(argv[++i]);
     else if (a == "--horizon" && i + 1 < argc) overrides.horizon = std::atof(argv[++i]);
     else if (a == "--skip" && i + 1 < argc) overrides.derivative_skip = std::atoi(argv[++i]);
@@ -451,7 +482,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr,
                    "usage: mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,nosyn,pneumatic] "
                    "[--out DIR] [--seed S] [--fixed-latency S] [--latency-sweep S,S,...] [--dt S] [--horizon S] "
-                   "[--skip K]\n");
+                   "[--skip K] [--sensed]\n");
       return 2;
     }
   }
@@ -497,6 +528,7 @@ int main(int argc, char** argv) {
     for (const auto& variant : variants) {
       TrialRunner runner(task, variant, overrides);
       runner.setFixedLatency(fixed_latency);
+      runner.setSensed(sensed);
       int ok = 0, diverged = 0, keys_ok = 0, keys_all = 0;
       double error_sum = 0, typing_time = 0;
       std::vector<double> plan_ms;

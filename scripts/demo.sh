@@ -1,13 +1,17 @@
 #!/usr/bin/env bash
 # The README's demo command: install, build, run the main demo headless.
-# The demo is the simulated robot (MuJoCo + pneumatic plant) in real time with the iLQG
-# force-abstraction pools tracking a finger open/close wave in the coffee-bean tube scene;
-# demo_report watches it for `duration` seconds (default 20), prints what happened, and the
-# bringup is ended cleanly (driver paused first, so no safety event is raised by the pools
-# going down before it). Exit status: demo_report's (non-zero if nothing moved).
-# Extra arguments go to roslaunch, e.g. `bash scripts/demo.sh rviz:=true scene:=keypad`;
-# `duration:=60` sets the report window. Afterwards it renders an image strip of the run
-# offscreen with MuJoCo (render_states under xvfb-run) into log/demo/demo_strip.png.
+# The demo is the behaviour MPC catching a bottle in real time, in pneumatic mode: the
+# simulated robot (MuJoCo + pneumatic plant), the iLQG force-abstraction pools tracking the
+# MPC's planned tendon tensions, and the MPC (iLQG, task catch). Once the MPC runs,
+# demo_report drops the bottle 7 cm above the palm, watches the catch for 3 s, prints what
+# happened (distance to the goal, lowest height, the pools' force tracking, the driver's
+# real-time factor), and the bringup is ended cleanly (driver paused first, so no safety
+# event is raised by the pools going down before it). Exit status: demo_report's (non-zero
+# when the bottle was not caught).
+# Extra arguments go to roslaunch, e.g. `bash scripts/demo.sh rviz:=true planner:=sampling`;
+# `task:=none` runs the earlier finger-wave demo (`duration:=60` sets its report window).
+# Afterwards it renders an image strip of the run offscreen with MuJoCo (render_states under
+# xvfb-run) into log/demo/demo_strip.png.
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 source "$here/env.sh"
@@ -17,19 +21,23 @@ cd "$WS_ROOT"
 source_workspace
 
 duration=20
+task=catch
 launch_args=()
 for arg in "$@"; do
   case "$arg" in
     duration:=*) duration="${arg#duration:=}" ;;
+    task:=*) task="${arg#task:=}"; launch_args+=("$arg") ;;
     *) launch_args+=("$arg") ;;
   esac
 done
+report_args=(_duration:="$duration")
+if [ "$task" = catch ]; then report_args+=(_drop_height:=0.07 _watch:=3.0); fi
 
 echo
 echo "== the ADROIT scenes (3 simulated seconds each, zero tension) =="
 rosrun adroit_description scene_report --seconds 3
 echo
-echo "== sim bringup: driver + pneumatic pools + demo motion, ${duration} s =="
+echo "== sim bringup: driver + pneumatic pools + behaviour MPC, task $task =="
 # A private master on a free port, so the demo never collides with a running ROS system.
 port=$((20000 + RANDOM % 20000))
 export ROS_MASTER_URI="http://127.0.0.1:$port"
@@ -46,7 +54,7 @@ mkdir -p "$out_dir"
 rm -f "$out_dir"/states.csv "$out_dir"/frame_*.ppm
 set +e
 scene="$(rosparam get /adroit_sim/scene 2>/dev/null)"
-rosrun adroit_launch demo_report.py _duration:="$duration" _states_csv:="$out_dir/states.csv"
+rosrun adroit_launch demo_report.py "${report_args[@]}" _states_csv:="$out_dir/states.csv"
 report_status=$?
 set -e
 # Pause first: a paused driver steps no watchdog, so the pools may go down in any order.
@@ -65,7 +73,7 @@ if [ -s "$out_dir/states.csv" ] && [ -n "$scene" ]; then
     k=0
     for t in ${times//,/ }; do frames+=("$t:$(printf '%s/frame_%03d.ppm' "$out_dir" "$k")"); k=$((k + 1)); done
     rosrun adroit_launch image_strip.py "$out_dir/demo_strip.png" \
-      "ADROIT demo ($scene scene)" "${frames[@]}" || echo "demo: image strip not written" >&2
+      "ADROIT demo: $task ($scene scene)" "${frames[@]}" || echo "demo: image strip not written" >&2
   else
     echo "demo: offscreen rendering failed; no image strip" >&2
   fi

@@ -4,13 +4,21 @@ joint range of motion per finger, force tracking of the pneumatic pools (desired
 from /adroit/force_reference against the measured tension in /adroit/actuator_states), and
 the driver's own diagnostics (real-time factor, step time, safety state). With ~states_csv it
 also records the robot and object state at ~states_rate Hz into a CSV that render_states draws
-(columns: time, 1-DOF joint names, object_root:x|y|z|qw|qx|qy|qz)."""
+(columns: time, 1-DOF joint names, object_root:x|y|z|qw|qx|qy|qz).
+
+With ~drop_height > 0 it runs the catch (task catch of the behaviour MPC): once the MPC's
+first force reference has been seen and ~drop_delay seconds have passed, it places the bottle
+~drop_height above the task's goal (/adroit/set_object_pose), watches it for ~watch seconds
+and reports its distance to the goal and its lowest height; the states are recorded from the
+drop on. Exit status 0 only when the bottle stayed above ~min_height and ended within
+~tolerance of the goal."""
 import math
 import sys
 from collections import defaultdict
 
 import rospy
 from adroit_msgs.msg import ActuatorStates, ForceReference
+from adroit_msgs.srv import SetObjectPose, SetObjectPoseRequest
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import JointState
@@ -31,6 +39,8 @@ class DemoReport:
         self.states_csv = rospy.get_param("~states_csv", "")
         self.states_period = 1.0 / float(rospy.get_param("~states_rate", 20.0))
         self.state_rows, self.state_names, self.object_pose, self.last_row = [], None, None, None
+        self.recording = True  # the catch records from the drop on
+        self.lowest_z = None    # of the object, while recording the catch
         rospy.Subscriber("/adroit/object/odom", Odometry, self.on_object, queue_size=10)
         rospy.Subscriber("/adroit/joint_states", JointState, self.on_joints, queue_size=50)
         rospy.Subscriber("/adroit/force_reference", ForceReference, self.on_reference, queue_size=5)
@@ -45,6 +55,8 @@ class DemoReport:
     def on_object(self, msg):
         p, q = msg.pose.pose.position, msg.pose.pose.orientation
         self.object_pose = [p.x, p.y, p.z, q.w, q.x, q.y, q.z]
+        if self.lowest_z is not None:
+            self.lowest_z = min(self.lowest_z, p.z)
 
     def record_state(self, msg):
         stamp = msg.header.stamp.to_sec()
@@ -71,7 +83,7 @@ class DemoReport:
         print(f"states recorded for the image strip: {self.states_csv}")
 
     def on_joints(self, msg):
-        if self.states_csv:
+        if self.states_csv and self.recording:
             self.record_state(msg)
         if not self.measuring(msg.header.stamp):
             return
@@ -136,16 +148,58 @@ class DemoReport:
         return moved
 
 
+def run_catch(node, wait):
+    """Drops the bottle above the MPC's goal once the MPC runs; True when it was caught."""
+    height = float(rospy.get_param("~drop_height"))
+    goal = rospy.get_param("/adroit_mpc/tasks/catch/goal_position")
+    watch = float(rospy.get_param("~watch", 3.0))
+    tolerance = float(rospy.get_param("~tolerance", 0.03))
+    min_height = float(rospy.get_param("~min_height", 0.2))
+    try:
+        rospy.wait_for_message("/adroit/force_reference", ForceReference, timeout=wait)
+    except rospy.ROSException:
+        print("demo_report: the behaviour MPC published no force reference", file=sys.stderr)
+        return False
+    rospy.sleep(float(rospy.get_param("~drop_delay", 2.0)))
+    rospy.wait_for_service("/adroit/set_object_pose", timeout=10)
+    request = SetObjectPoseRequest()
+    request.pose.position.x, request.pose.position.y, request.pose.position.z = goal[0], goal[1], goal[2] + height
+    request.pose.orientation.w = 1.0
+    node.state_rows, node.last_row = [], None
+    node.lowest_z = goal[2] + height
+    node.recording = True
+    response = rospy.ServiceProxy("/adroit/set_object_pose", SetObjectPose)(request)
+    if not response.success:
+        print("demo_report: set_object_pose refused: " + response.message, file=sys.stderr)
+        return False
+    rospy.sleep(watch)
+    node.recording = False
+    p = node.object_pose
+    distance = math.dist(p[:3], goal) if p else float("inf")
+    caught = node.lowest_z >= min_height and distance <= tolerance
+    print(f"\n== catch: bottle dropped {100 * height:.1f} cm above the goal ==")
+    print(f"after {watch:.1f} s it is {100 * distance:.1f} cm from the goal (tolerance {100 * tolerance:.0f} cm), "
+          f"lowest height {node.lowest_z:.3f} m (palm {min_height} m): {'CAUGHT' if caught else 'NOT caught'}")
+    return caught
+
+
 if __name__ == "__main__":
     rospy.init_node("demo_report")
     node = DemoReport()
+    wait = float(rospy.get_param("~wait", 60.0))
     try:  # the bringup may still be starting: the window opens with the robot's first state
-        rospy.wait_for_message("/adroit/joint_states", JointState, timeout=float(rospy.get_param("~wait", 60.0)))
+        rospy.wait_for_message("/adroit/joint_states", JointState, timeout=wait)
     except rospy.ROSException:
         print("demo_report: no /adroit/joint_states: the simulation driver did not come up", file=sys.stderr)
         sys.exit(2)
-    rospy.sleep(node.duration)
-    moved = node.report()
+    if float(rospy.get_param("~drop_height", 0.0)) > 0:
+        node.recording = False
+        ok = run_catch(node, wait)
+        moved = node.report()
+    else:
+        rospy.sleep(node.duration)
+        moved = node.report()
+        ok = moved > 0
     node.write_states()
     rospy.signal_shutdown("demo finished")
-    sys.exit(0 if moved > 0 else 1)
+    sys.exit(0 if ok else 1)

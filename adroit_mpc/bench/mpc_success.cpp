@@ -4,7 +4,10 @@
 //
 //   mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,nosyn]
 //               [--out DIR] [--seed S] [--fixed-latency S] [--latency-sweep S,S,...]
+//               [--dt S] [--horizon S] [--skip K]
 //
+// --dt, --horizon, --skip override the task's planner_dt and horizon hints and the iLQG
+// derivative skip (defaults: config/tasks/<task>.yaml, config/mpc.yaml).
 // --latency-sweep: iLQG on the first task again with each fixed planning latency (simulated
 // s per optimisation instead of the measured wall time): how fast the planner must be.
 //
@@ -26,7 +29,8 @@
 //
 // Writes DIR/success_trials.csv (one row per trial), DIR/success_traces.csv (the first trial
 // of each task and variant, error over time) and plots them with plot_success.py into
-// DIR/success_<task>.png. Ends with RESULT lines (DESIGN.md section 5).
+// DIR/success_<task>.png, and DIR/states_<task>_<variant>.csv (the first trial's joint
+// positions, for render_states). Ends with RESULT lines (DESIGN.md section 5).
 #include <adroit_core/mujoco_model.h>
 #include <adroit_core/timing_stats.h>
 #include <adroit_description/scenes.h>
@@ -75,6 +79,7 @@ struct TrialResult {
   double final_error = 0, lowest_z = 0, duration = 0, plan_ms_median = 0;
   int keys_correct = 0, keys_total = 0, diverged = 0;
   std::vector<std::pair<double, double>> trace;  // (t, error)
+  std::vector<std::vector<double>> qpos_trace;   // qpos at the trace times (for render_states)
 };
 
 std::string sceneOf(const std::string& task) {
@@ -116,10 +121,11 @@ void placeObject(const mjModel* m, mjData* d, const Eigen::Vector3d& p) {
 
 class TrialRunner {
  public:
-  TrialRunner(const std::string& task, const Variant& variant) : task_name_(task), variant_(variant) {
+  TrialRunner(const std::string& task, const Variant& variant, const PlannerSettings& overrides)
+      : task_name_(task), variant_(variant), settings_(overrides) {
     const TaskParams defaults = defaultTaskParams(task);
-    settings_.horizon = paramNumber(task, defaults, "horizon", 0.01, 5);
-    settings_.dt = paramNumber(task, defaults, "planner_dt", 1e-4, 0.1);
+    if (settings_.horizon <= 0) settings_.horizon = paramNumber(task, defaults, "horizon", 0.01, 5);
+    if (settings_.dt <= 0) settings_.dt = paramNumber(task, defaults, "planner_dt", 1e-4, 0.1);
     settings_.synergies = variant.synergies;
     PlanningModelSettings ms;
     ms.timestep = settings_.dt;
@@ -239,11 +245,37 @@ class TrialRunner {
     if (d->time >= next_trace_) {
       next_trace_ = d->time + 0.02;
       r.trace.emplace_back(d->time, task_name_ == "type" ? task.error(plan_model_.get(), observe_.get()) : task.error(m, d));
+      r.qpos_trace.emplace_back(d->qpos, d->qpos + m->nq);
     }
   }
 
  public:
   void resetTrace() { next_trace_ = 0; }
+  // The trial's states as render_states reads them: time, one column per hinge / slide joint,
+  // <free joint>:x|y|z|qw|qx|qy|qz.
+  void writeStates(const std::string& path, const TrialResult& r) const {
+    const mjModel* m = sim_model_.get();
+    std::ofstream out(path);
+    std::vector<int> columns;  // qpos address per column
+    out << "time";
+    for (int j = 0; j < m->njnt; ++j) {
+      const std::string name = mj_id2name(m, mjOBJ_JOINT, j);
+      const int adr = m->jnt_qposadr[j];
+      if (m->jnt_type[j] == mjJNT_FREE) {
+        for (const char* c : {"x", "y", "z", "qw", "qx", "qy", "qz"}) out << "," << name << ":" << c;
+        for (int k = 0; k < 7; ++k) columns.push_back(adr + k);
+      } else if (m->jnt_type[j] == mjJNT_HINGE || m->jnt_type[j] == mjJNT_SLIDE) {
+        out << "," << name;
+        columns.push_back(adr);
+      }
+    }
+    out << "\n";
+    for (std::size_t i = 0; i < r.trace.size(); ++i) {
+      out << r.trace[i].first;
+      for (int adr : columns) out << "," << r.qpos_trace[i][adr];
+      out << "\n";
+    }
+  }
   // >= 0: every optimisation takes this long in simulated time (instead of its wall time).
   void setFixedLatency(double seconds) { fixed_latency_ = seconds; }
 
@@ -273,6 +305,8 @@ int main(int argc, char** argv) {
   unsigned seed = 1;
   double fixed_latency = -1;
   std::vector<std::string> sweep;  // fixed latencies [s] for iLQG on the first task
+  PlannerSettings overrides;       // horizon, dt <= 0: the task's hints
+  overrides.horizon = overrides.dt = -1;
   std::string out_dir = ".", tasks_arg = "catch,relocate,type", variants_arg = "ilqg,sampling,nosyn";
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -283,10 +317,14 @@ int main(int argc, char** argv) {
     else if (a == "--seed" && i + 1 < argc) seed = static_cast<unsigned>(std::atoi(argv[++i]));
     else if (a == "--fixed-latency" && i + 1 < argc) fixed_latency = std::atof(argv[++i]);
     else if (a == "--latency-sweep" && i + 1 < argc) sweep = split(argv[++i]);
+    else if (a == "--dt" && i + 1 < argc) overrides.dt = std::atof(argv[++i]);
+    else if (a == "--horizon" && i + 1 < argc) overrides.horizon = std::atof(argv[++i]);
+    else if (a == "--skip" && i + 1 < argc) overrides.derivative_skip = std::atoi(argv[++i]);
     else {
       std::fprintf(stderr,
                    "usage: mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,nosyn] "
-                   "[--out DIR] [--seed S] [--fixed-latency S] [--latency-sweep S,S,...]\n");
+                   "[--out DIR] [--seed S] [--fixed-latency S] [--latency-sweep S,S,...] [--dt S] [--horizon S] "
+                   "[--skip K]\n");
       return 2;
     }
   }
@@ -328,7 +366,7 @@ int main(int argc, char** argv) {
   for (const auto& task : tasks) {
     const auto specs = makeTrials(task, trials, seed);
     for (const auto& variant : variants) {
-      TrialRunner runner(task, variant);
+      TrialRunner runner(task, variant, overrides);
       runner.setFixedLatency(fixed_latency);
       int ok = 0, diverged = 0, keys_ok = 0, keys_all = 0;
       double error_sum = 0, typing_time = 0;
@@ -346,8 +384,10 @@ int main(int argc, char** argv) {
         trials_csv << task << "," << variant.name << "," << spec.index << "," << r.success << "," << r.final_error << ","
                    << (r.lowest_z > 1e8 ? 0 : r.lowest_z) << "," << r.keys_correct << "," << r.keys_total << ","
                    << r.duration << "," << r.plan_ms_median << "," << r.diverged << "\n";
-        if (spec.index == 0)
+        if (spec.index == 0) {
           for (const auto& [t, e] : r.trace) traces_csv << task << "," << variant.name << "," << t << "," << e << "\n";
+          runner.writeStates(out_dir + "/states_" + task + "_" + variant.name + ".csv", r);
+        }
         std::fflush(stdout);
       }
       rate[task][variant.name] = static_cast<double>(ok) / specs.size();
@@ -367,7 +407,7 @@ int main(int argc, char** argv) {
     const auto specs = makeTrials(task, trials, seed);
     std::printf("\n%s, iLQG, success against a fixed planning latency (simulated s per optimisation):\n",
                 task.c_str());
-    TrialRunner runner(task, known.at("ilqg"));
+    TrialRunner runner(task, known.at("ilqg"), overrides);
     for (const auto& value : sweep) {
       const double latency = std::atof(value.c_str());
       runner.setFixedLatency(latency);

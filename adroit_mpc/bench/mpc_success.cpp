@@ -5,7 +5,7 @@
 //
 //   mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,nosyn,pneumatic]
 //               [--out DIR] [--seed S] [--fixed-latency S] [--latency-sweep S,S,...]
-//               [--dt S] [--horizon S] [--skip K] [--sensed]
+//               [--dt S] [--horizon S] [--skip K] [--sensed] [--events] [--set key=number]...
 //
 // --dt, --horizon, --skip override the task's planner_dt and horizon hints and the iLQG
 // derivative skip (defaults: config/tasks/<task>.yaml, config/mpc.yaml).
@@ -13,6 +13,9 @@
 // quantisation, delays) instead of the true state, as the node does.
 // --latency-sweep: iLQG on the first task again with each fixed planning latency (simulated
 // s per optimisation instead of the measured wall time): how fast the planner must be.
+// --events: print each trial's task events (phase, relocation stage, keys) with their time.
+// --set key=number: a task parameter (weight, threshold) over config/tasks/<task>.yaml, for
+// tuning without a rebuild (not applied to the --latency-sweep runner).
 //
 // Closed loop in emulated real time, ROS-free, against the simulation driver's core
 // (adroit_driver::SimulatedRobot: the physical scene in 2 ms steps, the pneumatic plant,
@@ -178,6 +181,7 @@ class TrialRunner {
       pool_ = std::make_unique<pneumatics::CylinderPool>(pool_cylinders_, robot_->cylinderNames(), pool_options_);
     next_tick_ = robot_->clock();
     TaskParams params;
+    for (const auto& [key, value] : param_overrides_) params.numbers[key] = value;
     if (has_object) params.vectors["goal_position"] = {spec.goal.x(), spec.goal.y(), spec.goal.z()};
     auto task = makeTask(task_name_, params);
     task->bind(plan_model_.get(), variant_.synergies ? Synergies::kCount : 0);
@@ -290,7 +294,8 @@ class TrialRunner {
     mju_copy(o->qvel, s.qvel.data(), pm->nv);
     if (pm->na) mju_copy(o->act, s.act.data(), pm->na);
     mj_forward(pm, o);
-    task.observe(pm, o, s.time);
+    for (const auto& e : task.observe(pm, o, s.time))
+      if (print_events_) std::printf("  t %.3f %s %s\n", s.time, e.kind.c_str(), e.detail.c_str());
   }
 
   // One driver step (2 ms). Force mode: the policy's tensions every step. Pneumatic mode:
@@ -383,6 +388,10 @@ class TrialRunner {
   }
   // >= 0: every optimisation takes this long in simulated time (instead of its wall time).
   void setFixedLatency(double seconds) { fixed_latency_ = seconds; }
+  // Print the task's events (phases, relocation stages, keys) as observe() reports them.
+  void setPrintEvents(bool on) { print_events_ = on; }
+  // Task parameters (numbers: weights, thresholds) over the task's defaults.
+  void setParams(const std::map<std::string, double>& numbers) { param_overrides_ = numbers; }
   // The planner and the policy see the driver's sensed signals (noise, quantisation, delays)
   // instead of the true state, as the node does.
   void setSensed(bool sensed) { sensed_ = sensed; }
@@ -444,6 +453,8 @@ class TrialRunner {
   int object_body_ = -1;
   double duration_ = 0, next_trace_ = 0, fixed_latency_ = -1;
   int steps_since_observe_ = 0;
+  bool print_events_ = false;
+  std::map<std::string, double> param_overrides_;
 };
 
 std::vector<std::string> split(const std::string& s) {
@@ -461,6 +472,8 @@ int main(int argc, char** argv) {
   unsigned seed = 1;
   double fixed_latency = -1;
   bool sensed = false;
+  bool print_events = false;
+  std::map<std::string, double> params;  // --set key=value
   std::vector<std::string> sweep;  // fixed latencies [s] for iLQG on the first task
   PlannerSettings overrides;       // horizon, dt <= 0: the task's hints
   overrides.horizon = overrides.dt = -1;
@@ -478,11 +491,17 @@ int main(int argc, char** argv) {
     else if (a == "--dt" && i + 1 < argc) overrides.dt = std::atof(argv[++i]);
     else if (a == "--horizon" && i + 1 < argc) overrides.horizon = std::atof(argv[++i]);
     else if (a == "--skip" && i + 1 < argc) overrides.derivative_skip = std::atoi(argv[++i]);
+    else if (a == "--events") print_events = true;
+    else if (a == "--set" && i + 1 < argc && std::strchr(argv[i + 1], '=')) {
+      const std::string kv = argv[++i];
+      params[kv.substr(0, kv.find('='))] = std::atof(kv.c_str() + kv.find('=') + 1);
+    }
     else {
       std::fprintf(stderr,
-                   "usage: mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,nosyn,pneumatic] "
-                   "[--out DIR] [--seed S] [--fixed-latency S] [--latency-sweep S,S,...] [--dt S] [--horizon S] "
-                   "[--skip K] [--sensed]\n");
+                   "usage: mpc_success [--trials N] [--tasks catch,relocate,type] "
+                   "[--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open] [--out DIR] [--seed S] "
+                   "[--fixed-latency S] [--latency-sweep S,S,...] [--dt S] [--horizon S] [--skip K] [--sensed] "
+                   "[--events] [--set key=number]...\n");
       return 2;
     }
   }
@@ -529,12 +548,20 @@ int main(int argc, char** argv) {
       TrialRunner runner(task, variant, overrides);
       runner.setFixedLatency(fixed_latency);
       runner.setSensed(sensed);
+      runner.setPrintEvents(print_events);
+      runner.setParams(params);
       int ok = 0, diverged = 0, keys_ok = 0, keys_all = 0;
       double error_sum = 0, typing_time = 0;
       std::vector<double> plan_ms;
       for (const auto& spec : specs) {
         runner.resetTrace();
+        if (print_events)
+          std::printf("%s %s trial %d: object %.3f %.3f %.3f, goal %.3f %.3f %.3f\n", task.c_str(),
+                      variant.name.c_str(), spec.index, spec.object_start.x(), spec.object_start.y(),
+                      spec.object_start.z(), spec.goal.x(), spec.goal.y(), spec.goal.z());
         const TrialResult r = runner.run(spec);
+        if (print_events)
+          std::printf("  end: error %.4f m%s\n", r.final_error, r.success ? " (success)" : "");
         ok += r.success;
         diverged += r.diverged;
         error_sum += r.final_error;

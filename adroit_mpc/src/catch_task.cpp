@@ -109,13 +109,15 @@ double ObjectTaskBase::stateCost(const mjModel* m, const mjData* d, double scale
   double cost = 0;
   velocityResidual(m, d, object_dofs_, derivatives, buf);
   cost += addResidualCost(scale * weights_[w_object_velocity_], Norm::quadratic(), buf, out);
-  if (graspTermsActive()) {
+  if (goalTermsActive()) {
     pointResidual(m, d, object_point_, BodyPoint::world(goal_position_), derivatives, buf);
     cost += addResidualCost(scale * weights_[w_goal_position_], Norm::smoothAbs(position_smoothing_), buf, out);
     if (weights_[w_goal_orientation_] > 0) {
       orientationResidual(m, d, object_body_, goal_orientation_, orientation_axes_, derivatives, buf);
       cost += addResidualCost(scale * weights_[w_goal_orientation_], Norm::quadratic(), buf, out);
     }
+  }
+  if (graspHintActive()) {
     pointResidual(m, d, object_point_, grasp_point_, derivatives, buf);
     cost += addResidualCost(scale * weights_[w_grasp_], Norm::smoothAbs(grasp_smoothing_), buf, out);
   }

@@ -169,6 +169,45 @@ void clearanceResidual(const mjModel* m, const mjData* d, const BodyPoint& a, co
   buf.jq.row(0).noalias() = -(diff / distance).transpose() * (buf.jac_a - buf.jac_b);
 }
 
+void sphereSurfaceResidual(const mjModel* m, const mjData* d, const BodyPoint& a, const BodyPoint& c,
+                           double radius, bool derivatives, ResidualBuffer& buf) {
+  requireRows(buf, 1, "sphereSurfaceResidual");
+  const Eigen::Vector3d pa = a.position(d), pc = c.position(d);
+  const Eigen::Vector3d diff = pa - pc;
+  const double distance = diff.norm();
+  buf.dim = 1;
+  buf.uses_q = derivatives;
+  buf.uses_v = false;
+  buf.r[0] = distance - radius;
+  if (!derivatives) return;
+  if (distance == 0.0) {  // direction undefined: flat
+    buf.jq.row(0).setZero();
+    return;
+  }
+  pointJacobian(m, d, a, pa, buf.jac_a);
+  pointJacobian(m, d, c, pc, buf.jac_b);
+  buf.jq.row(0).noalias() = (diff / distance).transpose() * (buf.jac_a - buf.jac_b);
+}
+
+void aboveResidual(const mjModel* m, const mjData* d, const BodyPoint& a, const BodyPoint& b, double height,
+                   bool derivatives, ResidualBuffer& buf) {
+  requireRows(buf, 1, "aboveResidual");
+  const Eigen::Vector3d pa = a.position(d), pb = b.position(d);
+  const double excess = pa.z() - pb.z() - height;
+  buf.dim = 1;
+  buf.uses_q = derivatives;
+  buf.uses_v = false;
+  buf.r[0] = excess > 0 ? excess : 0.0;
+  if (!derivatives) return;
+  if (buf.r[0] == 0.0) {  // inactive: flat
+    buf.jq.row(0).setZero();
+    return;
+  }
+  pointJacobian(m, d, a, pa, buf.jac_a);
+  pointJacobian(m, d, b, pb, buf.jac_b);
+  buf.jq.row(0) = buf.jac_a.row(2) - buf.jac_b.row(2);
+}
+
 void velocityResidual(const mjModel* m, const mjData* d, const DofList& dofs, bool derivatives, ResidualBuffer& buf) {
   const int n = dofs.size();
   requireRows(buf, n, "velocityResidual");

@@ -213,6 +213,52 @@ TEST_F(CostTerms, Clearance) {
   EXPECT_EQ(buf.jq.row(0).cwiseAbs().maxCoeff(), 0.0);
 }
 
+TEST_F(CostTerms, PointToSphereSurface) {
+  // The arm's tip to the surface of a sphere about a point off the free object's origin, so
+  // the tip's hinges and the object's translation and rotation all move the residual.
+  const BodyPoint tip = BodyPoint::site(m, "tip");
+  const BodyPoint centre = BodyPoint::bodyFrame(m, "object", {0.01, -0.02, 0.015});
+  const double distance = (tip.position(d) - centre.position(d)).norm();
+  ASSERT_GT(distance, 0.05);
+  // Outside, inside, on the surface: the signed distance to the surface.
+  for (const double radius : {0.5 * distance, 1.5 * distance, distance}) {
+    adroit_mpc::sphereSurfaceResidual(m, d, tip, centre, radius, false, buf);
+    ASSERT_EQ(buf.dim, 1);
+    EXPECT_NEAR(buf.r[0], distance - radius, 1e-12) << radius;
+  }
+  checkTerm([&](bool der) { adroit_mpc::sphereSurfaceResidual(m, d, tip, centre, 0.5 * distance, der, buf); },
+            Norm::quadratic(), 4.0, "tip outside the sphere");
+  checkTerm([&](bool der) { adroit_mpc::sphereSurfaceResidual(m, d, tip, centre, 1.5 * distance, der, buf); },
+            Norm::smoothAbs(0.01), 4.0, "tip inside the sphere");
+  // A fixed world point: only the object's translation moves the residual, by -n (n the unit
+  // direction from the centre to the point).
+  const BodyPoint world_point = BodyPoint::world(tip.position(d) + Eigen::Vector3d(0.1, 0.0, 0.0));
+  adroit_mpc::sphereSurfaceResidual(m, d, world_point, centre, 0.05, true, buf);
+  const int object_dof = m->jnt_dofadr[mj_name2id(m, mjOBJ_JOINT, "object_root")];
+  const Eigen::Vector3d n = (world_point.position(d) - centre.position(d)).normalized();
+  for (int k = 0; k < 3; ++k) EXPECT_NEAR(buf.jq(0, object_dof + k), -n[k], 1e-12) << k;
+  EXPECT_EQ(buf.jq(0, 0), 0.0);  // the arm's hinges do not move a world point or the object
+  // Tip at the centre: the direction is undefined, the residual is -radius and flat.
+  adroit_mpc::sphereSurfaceResidual(m, d, centre, centre, 0.03, true, buf);
+  EXPECT_NEAR(buf.r[0], -0.03, 1e-15);
+  EXPECT_EQ(buf.jq.row(0).cwiseAbs().maxCoeff(), 0.0);
+}
+
+TEST_F(CostTerms, AboveAHeight) {
+  const BodyPoint tip = BodyPoint::site(m, "tip");
+  const BodyPoint object = BodyPoint::bodyFrame(m, "object", {0.01, 0.0, -0.02});
+  const double dz = tip.position(d).z() - object.position(d).z();
+  // Active: the tip is 3 cm higher above the object point than allowed.
+  adroit_mpc::aboveResidual(m, d, tip, object, dz - 0.03, false, buf);
+  EXPECT_NEAR(buf.r[0], 0.03, 1e-12);
+  checkTerm([&](bool der) { adroit_mpc::aboveResidual(m, d, tip, object, dz - 0.03, der, buf); }, Norm::quadratic(),
+            5.0, "above (active)");
+  // Inactive: lower than allowed, zero and flat.
+  adroit_mpc::aboveResidual(m, d, tip, object, dz + 0.01, true, buf);
+  EXPECT_EQ(buf.r[0], 0.0);
+  EXPECT_EQ(buf.jq.row(0).cwiseAbs().maxCoeff(), 0.0);
+}
+
 TEST_F(CostTerms, ObjectVelocity) {
   const auto dofs = adroit_mpc::DofList::freeJoint(m, "object_root", 0.05);
   auto fill = [&](bool der) { adroit_mpc::velocityResidual(m, d, dofs, der, buf); };

@@ -303,19 +303,100 @@ TEST_F(RelocateOnBall, ReleaseSwitchesToLeavingTheObject) {
   (void)u;
 }
 
-TEST_F(RelocateOnBall, DerivativesMatchFiniteDifferencesInEveryPhase) {
+// The ball at the centroid of the thumb tip and the first finger tip of the rest pose: both
+// tips are then equally far from its surface (the gaps of the stage rules).
+Eigen::Vector3d between(const mjModel* m, const mjData* d) {
+  const auto site = [&](const char* name) { return Eigen::Vector3d(d->site_xpos + 3 * mj_name2id(m, mjOBJ_SITE, name)); };
+  return 0.5 * (site("S_thtip") + site("S_fftip"));
+}
+
+TEST_F(RelocateOnBall, DerivativesMatchFiniteDifferencesInEveryPhaseAndStage) {
   // Off the keyframe so the posture term of the release is active.
   for (int j = 0; j < 4; ++j) data->qpos[j] += 0.1 * (j + 1);
-  placeObject(graspSite() + Eigen::Vector3d(0.02, -0.01, 0.03));
+  mj_forward(model.get(), data.get());
+  placeObject(between(model.get(), data.get()) + Eigen::Vector3d(0.01, -0.01, 0.02));
   addVelocities(model.get(), data.get(), 0.3);
   const Eigen::VectorXd u = someControl(model.get());
-  checkDerivatives(*task, model.get(), data.get(), u, 0.0, "relocate hold");
+  ASSERT_EQ(relocate->stage(), adroit_mpc::RelocateTask::Stage::kApproach);
+  checkDerivatives(*task, model.get(), data.get(), u, 0.0, "relocate hold approach");
+  // Generous gaps: the tips around the ball count as holding it -> carry.
+  TaskParams p;
+  p.numbers["hold_gap"] = 0.2;
+  p.numbers["grasp_start_gap"] = 0.2;
+  p.numbers["lost_gap"] = 0.3;
+  auto carrying = adroit_mpc::makeTask("relocate", p);
+  carrying->bind(model.get(), kSynergies);
+  auto* carry = dynamic_cast<adroit_mpc::RelocateTask*>(carrying.get());
+  carrying->observe(model.get(), data.get(), 0.0);
+  ASSERT_EQ(carry->stage(), adroit_mpc::RelocateTask::Stage::kCarry);
+  checkDerivatives(*carrying, model.get(), data.get(), u, 0.0, "relocate hold carry");
   std::string why;
-  ASSERT_TRUE(task->setGoal({0.05, -0.3, 0.25}, Eigen::Quaterniond::Identity(), &why));
-  task->setWeight("w_goal_orientation", 0.5);  // exercise the orientation term too
-  checkDerivatives(*task, model.get(), data.get(), u, 0.0, "relocate goal");
-  ASSERT_TRUE(task->release(&why));
-  checkDerivatives(*task, model.get(), data.get(), u, 0.0, "relocate release");
+  ASSERT_TRUE(carrying->setGoal({0.05, -0.3, 0.25}, Eigen::Quaterniond::Identity(), &why));
+  carrying->setWeight("w_goal_orientation", 0.5);  // exercise the orientation term too
+  checkDerivatives(*carrying, model.get(), data.get(), u, 0.0, "relocate goal carry");
+  ASSERT_TRUE(carrying->release(&why));
+  checkDerivatives(*carrying, model.get(), data.get(), u, 0.0, "relocate release");
+}
+
+TEST_F(RelocateOnBall, StagesFollowTheObservedGrasp) {
+  auto scratch = task->makeScratch(model.get());
+  const Eigen::VectorXd u = someControl(model.get());
+  std::string why;
+  ASSERT_TRUE(task->setGoal({0.05, -0.3, 0.2}, Eigen::Quaterniond::Identity(), &why));
+  task->observe(model.get(), data.get(), 0.0);  // the phase event
+  // The ball on the table, the hand at rest far above it: approach. The goal does not count
+  // yet: another goal leaves the cost as it is.
+  placeObject({0.0, -0.15, 0.035});
+  EXPECT_TRUE(task->observe(model.get(), data.get(), 0.1).empty());
+  EXPECT_EQ(relocate->stage(), adroit_mpc::RelocateTask::Stage::kApproach);
+  const double approaching = task->runningCost(model.get(), data.get(), u, 0.0, *scratch);
+  ASSERT_TRUE(task->setGoal({-0.1, -0.2, 0.3}, Eigen::Quaterniond::Identity(), &why));
+  EXPECT_EQ(task->runningCost(model.get(), data.get(), u, 0.0, *scratch), approaching);
+  // The ball right between the thumb and the index tip: within the hold gap of both, but the
+  // default needs two fingers; with min_fingers 1 it is held -> carry, with a "stage" event.
+  placeObject(between(model.get(), data.get()));
+  std::vector<double> gaps;
+  relocate->fingertipGaps(data.get(), &gaps);
+  ASSERT_EQ(gaps.size(), 5u);
+  EXPECT_NEAR(gaps[0], gaps[1], 1e-12);  // thumb, first finger
+  TaskParams p;
+  p.numbers["min_fingers"] = 1;
+  p.numbers["hold_gap"] = gaps[0] + 0.001;
+  p.numbers["grasp_start_gap"] = gaps[0] + 0.001;
+  p.numbers["lost_gap"] = gaps[0] + 0.02;
+  p.vectors["goal_position"] = {0.05, -0.3, 0.2};
+  adroit_mpc::RelocateTask one_finger(p);
+  one_finger.bind(model.get(), kSynergies);
+  auto events = one_finger.observe(model.get(), data.get(), 0.2);
+  ASSERT_EQ(events.size(), 2u);
+  EXPECT_EQ(events[1].kind, "stage");
+  EXPECT_EQ(events[1].detail, "carry");
+  EXPECT_EQ(one_finger.stage(), adroit_mpc::RelocateTask::Stage::kCarry);
+  // Carrying, the goal counts: the same state costs more with a goal further away.
+  auto s2 = one_finger.makeScratch(model.get());
+  const double near_goal = one_finger.runningCost(model.get(), data.get(), u, 0.0, *s2);
+  ASSERT_TRUE(one_finger.setGoal({-0.3, -0.5, 0.35}, Eigen::Quaterniond::Identity(), &why));
+  EXPECT_GT(one_finger.runningCost(model.get(), data.get(), u, 0.0, *s2), near_goal + 1.0);
+  // The ball slips a few mm (within the lost gap): still carried, no event.
+  placeObject(between(model.get(), data.get()) + Eigen::Vector3d(0, 0, -0.005));
+  EXPECT_TRUE(one_finger.observe(model.get(), data.get(), 0.3).empty());
+  EXPECT_EQ(one_finger.stage(), adroit_mpc::RelocateTask::Stage::kCarry);
+  // Lost (10 cm away from the tips): back to approach.
+  placeObject(between(model.get(), data.get()) + Eigen::Vector3d(0, 0, -0.1));
+  events = one_finger.observe(model.get(), data.get(), 0.4);
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].detail, "approach");
+  // A planner's copy takes the stage along.
+  auto copy = one_finger.clone();
+  placeObject(between(model.get(), data.get()));
+  one_finger.observe(model.get(), data.get(), 0.5);
+  copy->copyParametersFrom(one_finger);
+  EXPECT_EQ(dynamic_cast<adroit_mpc::RelocateTask&>(*copy).stage(), adroit_mpc::RelocateTask::Stage::kCarry);
+  // Released: no stages any more, the phase rules.
+  ASSERT_TRUE(one_finger.release(&why));
+  events = one_finger.observe(model.get(), data.get(), 0.6);
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].kind, "phase");
 }
 
 TEST_F(RelocateOnBall, CopyParametersCopiesGoalPhaseAndWeights) {

@@ -51,8 +51,12 @@ class ObjectTaskBase : public Task {
   // Copies the live state of the base part (weights, goal); allocates nothing.
   void copyBaseFrom(const ObjectTaskBase& other);
 
-  // The object-to-goal and grasp-hint terms are on (relocate switches them off at release).
-  virtual bool graspTermsActive() const { return true; }
+  // The object-to-goal terms are on (relocate: only once the object is held, and not after
+  // the release).
+  virtual bool goalTermsActive() const { return true; }
+  // The grasp-hint term (object to the grasp site) is on (relocate: off while approaching and
+  // after the release).
+  virtual bool graspHintActive() const { return true; }
   // Extra state terms of a derived task (relocate's release), added with `scale`.
   virtual double extraStateCost(const mjModel* /*m*/, const mjData* /*d*/, double /*scale*/,
                                 ResidualBuffer& /*buf*/, CostDerivatives* /*out*/) const {

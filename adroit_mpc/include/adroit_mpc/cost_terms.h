@@ -99,6 +99,15 @@ void pointResidual(const mjModel* m, const mjData* d, const BodyPoint& a, const 
 // r = max(0, clearance - |a - b|) (1): zero once the points are `clearance` apart.
 void clearanceResidual(const mjModel* m, const mjData* d, const BodyPoint& a, const BodyPoint& b, double clearance,
                        bool derivatives, ResidualBuffer& buf);
+// r = |a - c| - radius (1): signed distance of the point a from the sphere of `radius` about
+// the point c (negative inside), e.g. a fingertip to a ball's surface. Jacobian
+// n' (J_a - J_c), n = (a - c) / |a - c|; flat (zero) where a == c and n is undefined.
+void sphereSurfaceResidual(const mjModel* m, const mjData* d, const BodyPoint& a, const BodyPoint& c,
+                           double radius, bool derivatives, ResidualBuffer& buf);
+// r = max(0, (a - b)_z - height) (1): zero while a is at most `height` above b in world z
+// (negative height: at least that far below), e.g. fingertips below a ball's equator.
+void aboveResidual(const mjModel* m, const mjData* d, const BodyPoint& a, const BodyPoint& b, double height,
+                   bool derivatives, ResidualBuffer& buf);
 // r_i = scale_i * qvel[dof_i]. Jacobian: rows of the identity in the velocity block.
 void velocityResidual(const mjModel* m, const mjData* d, const DofList& dofs, bool derivatives, ResidualBuffer& buf);
 // r = axis_scale .* e, e = mju_subQuat(body orientation, target): the rotation vector from the

@@ -65,8 +65,7 @@ adroit_mpc::TaskParams readTaskParams(const rosutil::Params& p, const ros::NodeH
 
 MpcParams readParams(const ros::NodeHandle& pnh) {
   const rosutil::Params p(pnh);
-  std::set<std::string> keys = {"scene", "model_file", "task", "tasks", "planner", "mode", "threads", "planner_nice",
-                                 "horizon", "dt",
+  std::set<std::string> keys = {"scene", "model_file", "task", "tasks", "planner", "mode", "threads", "horizon", "dt",
                                  "iterations", "synergies", "derivative_skip", "samples", "noise_scale",
                                  "control_rate", "state_timeout", "feedback_scale", "marker_rate",
                                  "diagnostics_period", "lockstep", "physics_timestep", "lockstep_controls_per_plan"};
@@ -89,7 +88,6 @@ MpcParams readParams(const ros::NodeHandle& pnh) {
 
   adroit_mpc::PlannerSettings& s = out.settings;
   s.threads = p.integer("threads", s.threads, 0, 64);
-  s.nice = p.integer("planner_nice", 5, 0, 19);
   // The task's hints (thesis table 6.3: typing plans 0.64 s at 20 ms) unless set here.
   p.checkKeys("tasks", std::set<std::string>(kTasks.begin(), kTasks.end()));
   for (const auto& t : kTasks) out.tasks[t] = readTaskParams(p, pnh, "tasks/" + t);

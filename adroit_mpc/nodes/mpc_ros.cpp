@@ -1,5 +1,4 @@
 // Set-up, the planner thread, the control thread and the lockstep loop (see mpc_ros.h).
-#include <adroit_core/thread_pool.h>
 #include <adroit_msgs/Step.h>
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <std_srvs/SetBool.h>
@@ -220,10 +219,6 @@ bool MpcNode::planOnce(const StateSnapshot& state) {
 }
 
 void MpcNode::plannerLoop() {
-  // The optimiser takes whatever CPU is left: the driver, the pools and this node's control
-  // thread must never wait for it (its workers run at the same nice value).
-  if (params_.settings.nice != 0 && !adroit::setThreadNice(params_.settings.nice))
-    ROS_WARN("adroit_mpc: ~planner_nice %d not applied", params_.settings.nice);
   while (running_ && ros::ok()) {
     if (stateAgeWall() > params_.state_timeout || !latestState(plan_state_)) {
       std::this_thread::sleep_for(std::chrono::milliseconds(1));

@@ -15,7 +15,7 @@ void IlqgPlanner::initialize(const mjModel* m, const Task& task, const PlannerSe
   const int nu = space_.size();
   nx_ = 2 * m->nv + m->na;
   task_->bind(m, nu - m->nu);
-  pool_ = std::make_unique<adroit::ThreadPool>(settings.threads, settings.nice);
+  pool_ = std::make_unique<adroit::ThreadPool>(settings.threads);
   const int workers = static_cast<int>(pool_->size());
   workspaces_.resize(workers);
   for (auto& w : workspaces_) w.initialize(m, *task_);

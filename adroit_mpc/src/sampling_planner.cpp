@@ -13,7 +13,7 @@ void SamplingPlanner::initialize(const mjModel* m, const Task& task, const Plann
   task_ = task.clone();
   space_.initialize(m, settings.synergies);
   task_->bind(m, space_.size() - m->nu);
-  pool_ = std::make_unique<adroit::ThreadPool>(settings.threads, settings.nice);
+  pool_ = std::make_unique<adroit::ThreadPool>(settings.threads);
   workspaces_.resize(pool_->size());
   for (auto& w : workspaces_) w.initialize(m, *task_);
 

@@ -30,7 +30,6 @@ struct PlannerSettings {
   double horizon = 0.3;      // s
   double dt = 0.01;          // s, knot spacing = the planning model's timestep
   int threads = 0;           // workers (0 = hardware cores)
-  int nice = 0;              // workers' nice value (the node raises it: the pools and driver go first)
   int iterations = 1;        // per optimize()
   bool synergies = true;     // five synergy controls after the actuators (thesis 6.4.5)
   // iLQG

@@ -1,27 +1,14 @@
 #include "adroit_core/thread_pool.h"
 
-#include <sys/resource.h>
-#include <sys/syscall.h>
-#include <unistd.h>
-
 #include <atomic>
 #include <exception>
 
 namespace adroit {
 
-bool setThreadNice(int nice) {
-  // A thread id as PRIO_PROCESS addresses that thread alone on Linux.
-  return setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), nice) == 0;
-}
-
-ThreadPool::ThreadPool(std::size_t threads, int nice) {
+ThreadPool::ThreadPool(std::size_t threads) {
   if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
   workers_.reserve(threads);
-  for (std::size_t i = 0; i < threads; ++i)
-    workers_.emplace_back([this, i, nice] {
-      if (nice != 0) setThreadNice(nice);
-      workerLoop(i);
-    });
+  for (std::size_t i = 0; i < threads; ++i) workers_.emplace_back([this, i] { workerLoop(i); });
 }
 
 ThreadPool::~ThreadPool() {

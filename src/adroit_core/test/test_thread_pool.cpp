@@ -5,13 +5,6 @@
 #include <stdexcept>
 #include <thread>
 
-#include <sys/resource.h>
-#include <sys/syscall.h>
-#include <unistd.h>
-#include <algorithm>
-#include <cerrno>
-#include <vector>
-
 #include "adroit_core/thread_pool.h"
 
 #include <cstdlib>
@@ -139,24 +132,4 @@ TEST(ThreadPool, ParallelForWorkersAllocatesNothing) {
   EXPECT_EQ(allocations.load(), 0);
   EXPECT_EQ(out[0], 51.0);
   EXPECT_EQ(out[63], 51.0);
-}
-
-// The workers run at the pool's nice value; the creating thread keeps its own.
-TEST(ThreadPool, WorkersRunAtTheRequestedNiceValue) {
-  const auto niceOfThisThread = [] {
-    errno = 0;
-    return getpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)));
-  };
-  const int before = niceOfThisThread();
-  const int wanted = std::min(19, before + 3);
-  adroit::ThreadPool pool(2, wanted);
-  std::vector<int> seen(pool.size(), -100);
-  pool.parallelForWorkers(64, [&](std::size_t, std::size_t w) { seen[w] = niceOfThisThread(); });
-  for (int value : seen)
-    if (value != -100) EXPECT_EQ(value, wanted);
-  EXPECT_EQ(niceOfThisThread(), before);
-  adroit::ThreadPool plain(1);
-  int plain_nice = -100;
-  plain.parallelForWorkers(1, [&](std::size_t, std::size_t) { plain_nice = niceOfThisThread(); });
-  EXPECT_EQ(plain_nice, before);
 }

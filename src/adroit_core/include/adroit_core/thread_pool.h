@@ -15,16 +15,10 @@
 
 namespace adroit {
 
-// Sets the calling thread's nice value (Linux: per thread). A computation beside a control
-// loop (a planner beside the pools and the driver) raises its own, so it yields the CPU to
-// them. Returns false when the kernel refuses (lowering it needs privileges).
-bool setThreadNice(int nice);
-
 class ThreadPool {
  public:
-  // threads == 0 means one per hardware core. nice != 0: every worker runs at that nice
-  // value (setThreadNice).
-  explicit ThreadPool(std::size_t threads = 0, int nice = 0);
+  // threads == 0 means one per hardware core.
+  explicit ThreadPool(std::size_t threads = 0);
   ~ThreadPool();
   ThreadPool(const ThreadPool&) = delete;
   ThreadPool& operator=(const ThreadPool&) = delete;

@@ -492,6 +492,7 @@ class Scene:
     object_qpos: List[float] = field(default_factory=list)
     table_touches_hand: bool = True
     extra_custom: str = ""
+    plan_objects: str = ""        # the planning model's objects, when they differ
 
 
 FREE_OBJECT_JOINT = '<freejoint name="object_root"/>'
@@ -502,9 +503,18 @@ def object_body(pos, inner, quat=(1, 0, 0, 0)):
             f'<site name="S_object" pos="0 0 0" size="0.005" rgba="1 0 0 1" group="3"/></body>')
 
 
-def keypad_xml():
+KEY_ARMATURE = 0.001
+# Planning variant: the key spring (100 N/m on 5 g + 1 g armature, omega = 129 rad/s) is
+# integrated explicitly, which is unstable for omega * dt > 2; at the typing planner's 20 ms
+# knots (thesis Table 6.3) omega * dt = 2.6 and a released key gains x3.6 per knot. 50 g of
+# armature gives omega * dt = 0.85 (as the hand joints get Table 6.1 armature for the planner).
+KEY_PLAN_ARMATURE = 0.05
+
+
+def keypad_xml(planning=False):
     """A 4 x 3 numeric keypad with spring-loaded keys (thesis 6.5): 6 mm travel, a press
     registers only at >= 5.5 mm (custom numeric keypad_press_depth)."""
+    armature = KEY_PLAN_ARMATURE if planning else KEY_ARMATURE
     labels = ["1", "2", "3", "4", "5", "6", "7", "8", "9", "bs", "0", "ent"]
     keys = []
     for i, label in enumerate(labels):
@@ -514,7 +524,7 @@ def keypad_xml():
         keys.append(
             f'<body name="key_{label}" pos="{fmt((x, y, 0.0495))}">'
             f'<joint name="KEY_{label}" type="slide" axis="0 0 1" range="-0.006 0" stiffness="100" '
-            f'springref="0.004" damping="0.05" armature="0.001"/>'
+            f'springref="0.004" damping="0.05" armature="{fmt(armature)}"/>'
             f'<geom name="C_key_{label}" type="box" size="0.009 0.009 0.004" mass="0.005" '
             f'rgba="0.9 0.9 0.85 1" contype="1" conaffinity="1" condim="3"/></body>')
     base = ('<body name="keypad" pos="0 0 0"><geom name="C_keypad" type="box" pos="0 -0.082 0.019" '
@@ -525,6 +535,7 @@ def keypad_xml():
 
 def scenes():
     pad, _ = keypad_xml()
+    plan_pad, _ = keypad_xml(planning=True)
     return [
         Scene("hand", "hand-only, table mounted palm down, no object", False,
               (0, -0.55, 0.15), PALM_DOWN),
@@ -554,7 +565,7 @@ def scenes():
               object_qpos=[0, -0.15, 0.035, 1, 0, 0, 0]),
         Scene("keypad", "typing on a numeric keypad with spring-loaded keys (thesis 6.5)", False,
               (0, -0.55, 0.12), PALM_DOWN, objects=pad,
-              extra_custom='<numeric name="keypad_press_depth" data="0.0055"/>'),
+              extra_custom='<numeric name="keypad_press_depth" data="0.0055"/>', plan_objects=plan_pad),
     ]
 
 # ----------------------------------------------------------------------------- MJCF writer
@@ -655,8 +666,9 @@ class Mjcf:
             lines.append(f'    <geom name="C_pedestal" type="box" pos="{fmt((s.mount_pos[0], s.mount_pos[1], -0.375))}" '
                          'size="0.08 0.08 0.375" rgba="0.3 0.3 0.32 1" contype="0" conaffinity="0"/>')
         lines.extend(self.body_xml(self.root, 2))
-        if s.objects:
-            lines.append("    " + s.objects)
+        objects = s.plan_objects if self.planning and s.plan_objects else s.objects
+        if objects:
+            lines.append("    " + objects)
         lines.append("  </worldbody>")
 
         lines.append("  <contact>")

@@ -6,12 +6,15 @@
 #include <adroit_core/mujoco_model.h>
 #include <adroit_description/scenes.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
 
 #include "adroit_mpc/planning_model.h"
 #include "adroit_mpc/task.h"
+#include "adroit_mpc/task_params.h"
 #include "adroit_mpc/type_task.h"
 
 namespace {
@@ -226,6 +229,36 @@ TEST_F(Typing, ObjectGoalsAreNotTaken) {
   EXPECT_FALSE(task->setGoal({0, 0, 0}, Eigen::Quaterniond::Identity(), &why));
   EXPECT_NE(why.find("type"), std::string::npos);
   EXPECT_FALSE(task->release(&why));
+}
+
+// The planner integrates the keypad at its knot spacing (type.yaml planner_dt, 20 ms). A key
+// released from 5 mm down must come back up and settle, not oscillate with growing amplitude
+// (explicit spring integration: unstable once omega * dt > 2), or every plan that touches a
+// key predicts nonsense.
+TEST(TypingPlanningModel, ReleasedKeyReturnsAtThePlannerStep) {
+  const adroit_mpc::TaskParams hints = adroit_mpc::defaultTaskParams("type");
+  adroit_mpc::PlanningModelSettings settings;
+  settings.timestep = hints.numbers.at("planner_dt");
+  settings.contact_margin = 0.001, settings.contact_softness = 0.001;  // as the node for typing
+  auto model = adroit_mpc::loadPlanningModel(
+      adroit::description::sceneFile(adroit_mpc::descriptionShareDir(), "keypad", true), settings);
+  // The key alone: no contacts (the hand would sink onto the keys without tension).
+  model->opt.disableflags |= mjDSBL_CONTACT;
+  const mjModel* m = model.get();
+  adroit::DataPtr d = adroit::makeData(m);
+  mj_resetDataKeyframe(m, d.get(), mj_name2id(m, mjOBJ_KEY, "rest"));
+  const int adr = m->jnt_qposadr[mj_name2id(m, mjOBJ_JOINT, "KEY_5")];
+  d->qpos[adr] = -0.005;
+  double highest = -1, last = 0;
+  for (int i = 0; i < static_cast<int>(0.5 / m->opt.timestep); ++i) {
+    mj_step(m, d.get());
+    ASSERT_TRUE(std::isfinite(d->qpos[adr])) << "step " << i;
+    highest = std::max(highest, d->qpos[adr]);
+    last = d->qpos[adr];
+  }
+  EXPECT_LT(highest, 0.004) << "the key flew more than 4 mm above its top";
+  EXPECT_GT(last, -0.0005) << "the key did not come back up";
+  EXPECT_LT(last, 0.003);
 }
 
 TEST(TypingBinding, NeedsAKeypad) {

@@ -82,18 +82,25 @@ class MpcPneumaticTest(unittest.TestCase):
             self.fail("the MPC published no force reference in pneumatic mode")
         cylinders = rospy.wait_for_message("/adroit/actuator_states", ActuatorStates, timeout=10).name
         self.assertEqual(sorted(first.name), sorted(cylinders), "a reference must name every cylinder")
-        time.sleep(1.0)  # the pools pressurise the cylinders
-        # Drop the bottle above the goal of the task (it fell off the idle hand at start-up).
+        # The bottle fell off the idle hand at start-up: give it to the MPC at its goal on the
+        # palm, then drop it from above (as scripts/demo.sh does).
         goal = rospy.get_param("/adroit_mpc/tasks/catch/goal_position")
-        drop = SetObjectPoseRequest()
-        drop.pose.position.x, drop.pose.position.y, drop.pose.position.z = goal[0], goal[1], goal[2] + 0.07
-        drop.pose.orientation.w = 1.0
         rospy.wait_for_service("/adroit/set_object_pose", timeout=10)
+        place = rospy.ServiceProxy("/adroit/set_object_pose", SetObjectPose)
+
+        def put(z):
+            request = SetObjectPoseRequest()
+            request.pose.position.x, request.pose.position.y, request.pose.position.z = goal[0], goal[1], z
+            request.pose.orientation.w = 1.0
+            response = place(request)
+            self.assertTrue(response.success, response.message)
+
+        put(goal[2])
+        time.sleep(2.0)
         window = rospy.get_param("~window", 3.0)
         with self.lock:
             type(self).recording = True
-        response = rospy.ServiceProxy("/adroit/set_object_pose", SetObjectPose)(drop)
-        self.assertTrue(response.success, response.message)
+        put(goal[2] + 0.07)
         time.sleep(window)
         with self.lock:
             type(self).recording = False

@@ -30,10 +30,11 @@ def main(out_dir):
             t.append(float(row["t"]))
             e.append(float(row["error"]))
     for task, by_variant in trials.items():
-        fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4))
+        fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.4))
         names = list(by_variant)
         rates = [100.0 * sum(v) / len(v) for v in by_variant.values()]
         left.bar(names, rates, color="tab:blue")
+        left.tick_params(axis="x", labelrotation=30, labelsize=8)
         target = 90 if task == "type" else 80
         left.axhline(target, color="tab:red", linestyle="--", label="target %d %%" % target)
         left.set_ylim(0, 100)

@@ -5,10 +5,13 @@
 //
 //   mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,nosyn,pneumatic]
 //               [--out DIR] [--seed S] [--fixed-latency S] [--latency-sweep S,S,...]
-//               [--dt S] [--horizon S] [--skip K] [--sensed] [--events] [--set key=number]...
+//               [--dt S] [--horizon S] [--skip K] [--sensed] [--contact M,S] [--events]
+//               [--set key=number]...
 //
 // --dt, --horizon, --skip override the task's planner_dt and horizon hints and the iLQG
 // derivative skip (defaults: config/tasks/<task>.yaml, config/mpc.yaml).
+// --contact M,S: the planning model's contact margin and softness [m] (defaults: planning_model.h;
+// typing 0.001, 0.001 as the node).
 // --sensed: the planner and the policy see the driver's sensed signals (sensor realism: noise,
 // quantisation, delays) instead of the true state, as the node does.
 // --latency-sweep: iLQG on the first task again with each fixed planning latency (simulated
@@ -133,7 +136,9 @@ std::vector<TrialSpec> makeTrials(const std::string& task, int n, unsigned seed)
 
 class TrialRunner {
  public:
-  TrialRunner(const std::string& task, const Variant& variant, const PlannerSettings& overrides)
+  // contact_margin / contact_softness >= 0 override the planning model's (--contact M,S).
+  TrialRunner(const std::string& task, const Variant& variant, const PlannerSettings& overrides,
+              double contact_margin = -1, double contact_softness = -1)
       : task_name_(task), variant_(variant), settings_(overrides) {
     const TaskParams defaults = defaultTaskParams(task);
     if (settings_.horizon <= 0) settings_.horizon = paramNumber(task, defaults, "horizon", 0.01, 5);
@@ -142,6 +147,8 @@ class TrialRunner {
     PlanningModelSettings ms;
     ms.timestep = settings_.dt;
     if (task == "type") ms.contact_margin = 0.001, ms.contact_softness = 0.001;  // as the node
+    if (contact_margin >= 0) ms.contact_margin = contact_margin;
+    if (contact_softness >= 0) ms.contact_softness = contact_softness;
     const std::string share = descriptionShareDir();
     plan_model_ = loadPlanningModel(adroit::description::sceneFile(share, sceneOf(task), true), ms);
     observe_ = adroit::makeData(plan_model_.get());
@@ -472,6 +479,7 @@ int main(int argc, char** argv) {
   unsigned seed = 1;
   double fixed_latency = -1;
   bool sensed = false;
+  double contact_margin = -1, contact_softness = -1;  // --contact M,S
   bool print_events = false;
   std::map<std::string, double> params;  // --set key=value
   std::vector<std::string> sweep;  // fixed latencies [s] for iLQG on the first task
@@ -488,6 +496,10 @@ int main(int argc, char** argv) {
     else if (a == "--fixed-latency" && i + 1 < argc) fixed_latency = std::atof(argv[++i]);
     else if (a == "--latency-sweep" && i + 1 < argc) sweep = split(argv[++i]);
     else if (a == "--sensed") sensed = true;
+    else if (a == "--contact" && i + 1 < argc && std::strchr(argv[i + 1], ',')) {
+      contact_margin = std::atof(argv[++i]);
+      contact_softness = std::atof(std::strchr(argv[i], ',') + 1);
+    }
     else if (a == "--dt" && i + 1 < argc) overrides.dt = std::atof(argv[++i]);
     else if (a == "--horizon" && i + 1 < argc) overrides.horizon = std::atof(argv[++i]);
     else if (a == "--skip" && i + 1 < argc) overrides.derivative_skip = std::atoi(argv[++i]);
@@ -501,7 +513,7 @@ int main(int argc, char** argv) {
                    "usage: mpc_success [--trials N] [--tasks catch,relocate,type] "
                    "[--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open] [--out DIR] [--seed S] "
                    "[--fixed-latency S] [--latency-sweep S,S,...] [--dt S] [--horizon S] [--skip K] [--sensed] "
-                   "[--events] [--set key=number]...\n");
+                   "[--contact M,S] [--events] [--set key=number]...\n");
       return 2;
     }
   }
@@ -545,7 +557,7 @@ int main(int argc, char** argv) {
   for (const auto& task : tasks) {
     const auto specs = makeTrials(task, trials, seed);
     for (const auto& variant : variants) {
-      TrialRunner runner(task, variant, overrides);
+      TrialRunner runner(task, variant, overrides, contact_margin, contact_softness);
       runner.setFixedLatency(fixed_latency);
       runner.setSensed(sensed);
       runner.setPrintEvents(print_events);

@@ -83,7 +83,7 @@ class MpcPneumaticTest(unittest.TestCase):
         cylinders = rospy.wait_for_message("/adroit/actuator_states", ActuatorStates, timeout=10).name
         self.assertEqual(sorted(first.name), sorted(cylinders), "a reference must name every cylinder")
         # The bottle fell off the idle hand at start-up: give it to the MPC at its goal on the
-        # palm, then drop it from above (as scripts/demo.sh does).
+        # palm, then hold it 7 cm above for 0.4 s and let go (as scripts/demo.sh does).
         goal = rospy.get_param("/adroit_mpc/tasks/catch/goal_position")
         rospy.wait_for_service("/adroit/set_object_pose", timeout=10)
         place = rospy.ServiceProxy("/adroit/set_object_pose", SetObjectPose)
@@ -97,6 +97,10 @@ class MpcPneumaticTest(unittest.TestCase):
 
         put(goal[2])
         time.sleep(2.0)
+        hold_until = time.time() + 0.4  # held above the palm, then let go
+        while time.time() < hold_until:
+            put(goal[2] + 0.07)
+            time.sleep(0.01)
         window = rospy.get_param("~window", 3.0)
         with self.lock:
             type(self).recording = True

@@ -6,10 +6,11 @@ the driver's own diagnostics (real-time factor, step time, safety state). With ~
 also records the robot and object state at ~states_rate Hz into a CSV that render_states draws
 (columns: time, 1-DOF joint names, object_root:x|y|z|qw|qx|qy|qz).
 
-With ~drop_height > 0 it runs the catch (task catch of the behaviour MPC): once the MPC's
-first force reference has been seen it puts the bottle at the task's goal on the palm
-(/adroit/set_object_pose), ~drop_delay seconds later it places it ~drop_height above the goal
-and lets it fall, watches it for ~watch seconds and reports whether it was caught (stayed
+With ~drop_height > 0 it runs the catch (task catch of the behaviour MPC): it starts the
+paused driver (/adroit/pause false) once the pools command, and once the MPC's first force
+reference has been seen it puts the bottle at the task's goal on the palm
+(/adroit/set_object_pose), ~drop_delay seconds later it holds it ~drop_height above the goal
+for ~drop_hold seconds and lets it fall, watches it for ~watch seconds and reports whether it was caught (stayed
 above ~min_height, ended within ~tolerance of the goal); the states are recorded from the
 drop on. Exit status 0 when the stack ran sound: the MPC planned and the driver never entered
 its safe state (watchdog, e-stop, fault). Whether the bottle is caught in real time depends
@@ -19,10 +20,11 @@ import sys
 from collections import defaultdict
 
 import rospy
-from adroit_msgs.msg import ActuatorStates, ForceReference
+from adroit_msgs.msg import ActuatorStates, ForceReference, ValveCommand
 from adroit_msgs.srv import SetObjectPose, SetObjectPoseRequest
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
+from std_srvs.srv import SetBool
 from sensor_msgs.msg import JointState
 
 OBJECT_COLUMNS = ["object_root:" + f for f in ("x", "y", "z", "qw", "qx", "qy", "qz")]
@@ -158,6 +160,15 @@ def run_catch(node, wait):
     watch = float(rospy.get_param("~watch", 3.0))
     tolerance = float(rospy.get_param("~tolerance", 0.03))
     min_height = float(rospy.get_param("~min_height", 0.2))
+    # demo.launch starts the driver paused for the catch: start it once the pools command.
+    try:
+        rospy.wait_for_message("/adroit/valve_command", ValveCommand, timeout=wait)
+    except rospy.ROSException:
+        print("demo_report: the pools sent no valve command", file=sys.stderr)
+        return None
+    rospy.sleep(1.0)
+    rospy.wait_for_service("/adroit/pause", timeout=10)
+    rospy.ServiceProxy("/adroit/pause", SetBool)(False)
     try:
         rospy.wait_for_message("/adroit/force_reference", ForceReference, timeout=wait)
     except rospy.ROSException:
@@ -180,6 +191,13 @@ def run_catch(node, wait):
     if not put(goal[2]):
         return None
     rospy.sleep(float(rospy.get_param("~drop_delay", 2.0)))
+    # Held still above the palm for a moment, then let go: the MPC sees it coming (as a
+    # person's hand releasing it; mpc_success's trials do the same).
+    hold_until = rospy.get_time() + float(rospy.get_param("~drop_hold", 0.4))
+    while rospy.get_time() < hold_until:
+        if not put(goal[2] + height):
+            return None
+        rospy.sleep(0.01)
     node.state_rows, node.last_row = [], None
     node.lowest_z = goal[2] + height
     node.recording = True
@@ -200,12 +218,15 @@ if __name__ == "__main__":
     rospy.init_node("demo_report")
     node = DemoReport()
     wait = float(rospy.get_param("~wait", 60.0))
+    catch = float(rospy.get_param("~drop_height", 0.0)) > 0
     try:  # the bringup may still be starting: the window opens with the robot's first state
-        rospy.wait_for_message("/adroit/joint_states", JointState, timeout=wait)
+        # (the catch starts a paused driver itself, in run_catch)
+        if not catch:
+            rospy.wait_for_message("/adroit/joint_states", JointState, timeout=wait)
     except rospy.ROSException:
         print("demo_report: no /adroit/joint_states: the simulation driver did not come up", file=sys.stderr)
         sys.exit(2)
-    if float(rospy.get_param("~drop_height", 0.0)) > 0:
+    if catch:
         node.recording = False
         caught = run_catch(node, wait)
         node.report()

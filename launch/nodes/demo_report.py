@@ -20,7 +20,7 @@ import sys
 from collections import defaultdict
 
 import rospy
-from adroit_msgs.msg import ActuatorStates, ForceReference, ValveCommand
+from adroit_msgs.msg import ActuatorStates, ForceReference, TendonForceCommand, ValveCommand
 from adroit_msgs.srv import SetObjectPose, SetObjectPoseRequest
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
@@ -160,19 +160,26 @@ def run_catch(node, wait):
     watch = float(rospy.get_param("~watch", 3.0))
     tolerance = float(rospy.get_param("~tolerance", 0.03))
     min_height = float(rospy.get_param("~min_height", 0.2))
-    # demo.launch starts the driver paused for the catch: start it once the pools command.
+    # demo.launch starts the driver paused for the catch: start it once the pools command
+    # (force mode has no pools: once the MPC is up).
     try:
-        rospy.wait_for_message("/adroit/valve_command", ValveCommand, timeout=wait)
+        if rospy.get_param("/adroit_sim/mode", "pneumatic") == "pneumatic":
+            rospy.wait_for_message("/adroit/valve_command", ValveCommand, timeout=wait)
+        else:
+            rospy.wait_for_service("/adroit/mpc/set_task", timeout=wait)
     except rospy.ROSException:
-        print("demo_report: the pools sent no valve command", file=sys.stderr)
+        print("demo_report: the pools (or the MPC) did not come up", file=sys.stderr)
         return None
     rospy.sleep(1.0)
     rospy.wait_for_service("/adroit/pause", timeout=10)
     rospy.ServiceProxy("/adroit/pause", SetBool)(False)
-    try:
-        rospy.wait_for_message("/adroit/force_reference", ForceReference, timeout=wait)
+    try:  # the MPC's output: force references to the pools, or tendon forces to the driver
+        if rospy.get_param("/adroit_sim/mode", "pneumatic") == "pneumatic":
+            rospy.wait_for_message("/adroit/force_reference", ForceReference, timeout=wait)
+        else:
+            rospy.wait_for_message("/adroit/tendon_force_command", TendonForceCommand, timeout=wait)
     except rospy.ROSException:
-        print("demo_report: the behaviour MPC published no force reference", file=sys.stderr)
+        print("demo_report: the behaviour MPC published nothing", file=sys.stderr)
         return None
     rospy.wait_for_service("/adroit/set_object_pose", timeout=10)
     place = rospy.ServiceProxy("/adroit/set_object_pose", SetObjectPose)

@@ -149,44 +149,43 @@ void pointResidual(const mjModel* m, const mjData* d, const BodyPoint& a, const 
   buf.jq.topRows<3>() = buf.jac_a - buf.jac_b;
 }
 
-void clearanceResidual(const mjModel* m, const mjData* d, const BodyPoint& a, const BodyPoint& b, double clearance,
-                       bool derivatives, ResidualBuffer& buf) {
-  requireRows(buf, 1, "clearanceResidual");
+namespace {
+
+// r = sign * (|a - b| - offset) (1); Jacobian sign * (a - b)' / |a - b| (J_a - J_b), flat where
+// `active` is false or the direction is undefined (a = b).
+void distanceResidual(const mjModel* m, const mjData* d, const BodyPoint& a, const BodyPoint& b, double offset,
+                      double sign, bool clamp_at_zero, bool derivatives, ResidualBuffer& buf) {
   const Eigen::Vector3d pa = a.position(d), pb = b.position(d);
   const Eigen::Vector3d diff = pa - pb;
   const double distance = diff.norm();
+  const double r = sign * (distance - offset);
+  const bool active = !clamp_at_zero || r > 0;
   buf.dim = 1;
   buf.uses_q = derivatives;
   buf.uses_v = false;
-  buf.r[0] = distance < clearance ? clearance - distance : 0.0;
+  buf.r[0] = active ? r : 0.0;
   if (!derivatives) return;
-  if (buf.r[0] == 0.0 || distance == 0.0) {  // inactive (or direction undefined): flat
+  if (!active || distance == 0.0) {
     buf.jq.row(0).setZero();
     return;
   }
   pointJacobian(m, d, a, pa, buf.jac_a);
   pointJacobian(m, d, b, pb, buf.jac_b);
-  buf.jq.row(0).noalias() = -(diff / distance).transpose() * (buf.jac_a - buf.jac_b);
+  buf.jq.row(0).noalias() = (sign / distance) * diff.transpose() * (buf.jac_a - buf.jac_b);
+}
+
+}  // namespace
+
+void clearanceResidual(const mjModel* m, const mjData* d, const BodyPoint& a, const BodyPoint& b, double clearance,
+                       bool derivatives, ResidualBuffer& buf) {
+  requireRows(buf, 1, "clearanceResidual");
+  distanceResidual(m, d, a, b, clearance, -1.0, true, derivatives, buf);  // max(0, clearance - |a - b|)
 }
 
 void sphereSurfaceResidual(const mjModel* m, const mjData* d, const BodyPoint& a, const BodyPoint& c,
                            double radius, bool derivatives, ResidualBuffer& buf) {
   requireRows(buf, 1, "sphereSurfaceResidual");
-  const Eigen::Vector3d pa = a.position(d), pc = c.position(d);
-  const Eigen::Vector3d diff = pa - pc;
-  const double distance = diff.norm();
-  buf.dim = 1;
-  buf.uses_q = derivatives;
-  buf.uses_v = false;
-  buf.r[0] = distance - radius;
-  if (!derivatives) return;
-  if (distance == 0.0) {  // direction undefined: flat
-    buf.jq.row(0).setZero();
-    return;
-  }
-  pointJacobian(m, d, a, pa, buf.jac_a);
-  pointJacobian(m, d, c, pc, buf.jac_b);
-  buf.jq.row(0).noalias() = (diff / distance).transpose() * (buf.jac_a - buf.jac_b);
+  distanceResidual(m, d, a, c, radius, 1.0, false, derivatives, buf);  // |a - c| - radius
 }
 
 void aboveResidual(const mjModel* m, const mjData* d, const BodyPoint& a, const BodyPoint& b, double height,

@@ -3,8 +3,6 @@
 // and queues each step's outputs for the publisher thread. After start-up it allocates
 // nothing and logs nothing; the only lock it can meet held by another thread is
 // robot_mutex_ (priority inheritance), whose other holders copy a few numbers.
-#include <pthread.h>
-#include <sched.h>
 #include <sys/resource.h>
 #include <sys/syscall.h>
 #include <unistd.h>
@@ -13,6 +11,7 @@
 #include <chrono>
 #include <cstring>
 
+#include "adroit_core/scheduling.h"
 #include "sim_driver.h"
 
 namespace adroit::driver {
@@ -22,13 +21,11 @@ using SteadyClock = std::chrono::steady_clock;
 }  // namespace
 
 bool SimDriver::enterRealtimeScheduling() {
-  sched_param sp{};
-  sp.sched_priority = params_.realtime_priority;
-  const int error = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
-  if (error != 0) {
+  std::string error;
+  if (!enterFifo(params_.realtime_priority, &error)) {
     ROS_WARN("adroit_sim: ~realtime_priority %d: SCHED_FIFO not permitted (%s); stepping with normal scheduling "
              "(grant an rtprio limit or CAP_SYS_NICE, or set ~realtime_priority: 0)",
-             params_.realtime_priority, std::strerror(error));
+             params_.realtime_priority, error.c_str());
     return false;
   }
   fifo_priority_ = params_.realtime_priority;
@@ -37,8 +34,7 @@ bool SimDriver::enterRealtimeScheduling() {
 }
 
 void SimDriver::leaveRealtimeScheduling(const char* why) {
-  sched_param sp{};
-  pthread_setschedparam(pthread_self(), SCHED_OTHER, &sp);
+  leaveFifo();
   fifo_priority_ = 0;
   ROS_WARN("adroit_sim: leaving SCHED_FIFO: %s", why);
 }

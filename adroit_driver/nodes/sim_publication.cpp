@@ -2,13 +2,12 @@
 // publisher thread fills the messages, serialises and sends them (and /clock, tf, markers).
 #include <boost/make_shared.hpp>
 
-#include <pthread.h>
-#include <sched.h>
 
 #include <chrono>
 
 #include <rosgraph_msgs/Clock.h>
 
+#include "adroit_core/scheduling.h"
 #include "sim_driver.h"
 
 namespace adroit::driver {
@@ -85,11 +84,8 @@ void SimDriver::publishLoop() {
   // Real time: the states leave at their deadlines only if this thread runs when woken, so
   // it runs under SCHED_FIFO just below the simulation thread (it sleeps between states;
   // the simulation thread's start-up says whether SCHED_FIFO is permitted at all).
-  if (params_.realtime && params_.realtime_priority > 1) {
-    sched_param sp{};
-    sp.sched_priority = params_.realtime_priority - 1;
-    if (pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp) == 0) publisher_fifo_priority_ = sp.sched_priority;
-  }
+  if (params_.realtime && params_.realtime_priority > 1 && enterFifo(params_.realtime_priority - 1, nullptr))
+    publisher_fifo_priority_ = params_.realtime_priority - 1;
   bool streaming = false;  // batches keep coming: look again by itself
   for (;;) {
     {

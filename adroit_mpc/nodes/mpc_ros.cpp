@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 
+#include "adroit_core/scheduling.h"
 #include "adroit_mpc/planning_model.h"
 #include "adroit_mpc/synergies.h"
 #include "mpc_ros.h"
@@ -133,6 +134,16 @@ MpcNode::MpcNode(ros::NodeHandle nh, ros::NodeHandle pnh)
 MpcNode::~MpcNode() { stop(); }
 
 void MpcNode::start() {
+  if (params_.nice > 0) {
+    // Before the node's own threads start (they inherit it); the thread pool and roscpp's
+    // threads, already running, are set one by one.
+    const adroit::BackgroundResult r = adroit::runInBackground(params_.nice);
+    if (!r.error.empty())
+      ROS_WARN("adroit_mpc: ~nice %d: %s", params_.nice, r.error.c_str());
+    else
+      ROS_INFO("adroit_mpc: nice %d (%d threads%s)", params_.nice, r.threads,
+               r.autogroup ? ", and the session's autogroup" : "; the session is shared, its autogroup is left alone");
+  }
   running_ = true;
   state_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &state_queue_);
   state_spinner_->start();

@@ -68,6 +68,9 @@ struct MpcParams {
   double feedback_scale = 1.0;     // of the policy's gains at the control rate
   double marker_rate = 5;          // wall Hz, only while someone listens
   double diagnostics_period = 1.0;  // wall s
+  // Nice value of the whole node and, under roslaunch, of its session's autogroup
+  // (adroit::runInBackground): on two cores the driver and the pools come first.
+  int nice = 19;
   // Lockstep: drive a paused simulation through /adroit/step.
   bool lockstep = false;
   double physics_timestep = 0.002;  // s, the driver's step

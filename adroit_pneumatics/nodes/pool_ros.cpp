@@ -11,6 +11,9 @@
 //    preallocated slot (CommandSlot), then wakes the publisher with a semaphore post;
 //  * the publisher thread: builds the ValveCommand (by index, resolved once from the
 //    actuator-state order) and publishes it; roscpp allocates and serialises here.
+// Both run under SCHED_FIFO (~realtime_priority) when the system permits: the driver's
+// watchdog trips when a cylinder goes 50 ms without a command, and at normal scheduling
+// a busy node on the same two cores delayed the tick by up to 80 ms.
 #include <semaphore.h>
 
 #include <algorithm>
@@ -31,6 +34,7 @@
 #include <adroit_msgs/ValveCommand.h>
 #include <diagnostic_msgs/DiagnosticArray.h>
 
+#include "adroit_core/scheduling.h"
 #include "adroit_pneumatics/params_io.h"
 #include "adroit_pneumatics/pool.h"
 #include "adroit_ros/diagnostics.h"
@@ -103,7 +107,7 @@ class PoolRos {
     const Params p(pnh);
     p.checkKeys("", {"model_file", "scene", "cylinders", "pool", "group_size", "controller", "params_file", "rate",
                      "reference_timeout", "state_timeout", "stamp_tolerance", "exhaust_volts", "ilqg", "pidf",
-                     "diagnostics_period"});
+                     "diagnostics_period", "realtime_priority"});
     p.checkKeys("ilqg", {"horizon", "dt", "alpha_p", "alpha_u", "alpha_w", "u_min", "u_max", "iterations",
                          "feedback_fraction", "solve_every", "disturbance_gain", "disturbance_limit",
                          "u_des_steady_state", "measurement_gain", "measurement_band", "jump_threshold",
@@ -153,6 +157,7 @@ class PoolRos {
     const PoolOptions o = readOptions(p, pnh);
     const double rate = p.number("rate", 200.0, 1e-3, 2000.0);
     const double diag_period = p.number("diagnostics_period", 1.0, 1e-3, 3600.0);
+    realtime_priority_ = p.integer("realtime_priority", 15, 0, 98);
 
     pool_ = std::make_unique<CylinderPool>(std::move(cylinders), known, o);
     controller_ = o.controller;
@@ -247,7 +252,23 @@ class PoolRos {
     return false;
   }
 
+  // SCHED_FIFO for the calling thread at `priority` (0: stay at normal scheduling); the
+  // outcome is kept for the diagnostics and said once.
+  void enterRealtime(int priority, const char* thread) {
+    if (priority <= 0) return;
+    std::string error;
+    if (enterFifo(priority, &error)) {
+      ROS_INFO("%s: %s thread under SCHED_FIFO, priority %d", name_.c_str(), thread, priority);
+      return;
+    }
+    fifo_refused_ = true;
+    ROS_WARN_ONCE("%s: ~realtime_priority %d: SCHED_FIFO not permitted (%s); the %s thread keeps normal scheduling "
+                  "(grant an rtprio limit or CAP_SYS_NICE, or set ~realtime_priority: 0)",
+                  name_.c_str(), priority, error.c_str(), thread);
+  }
+
   void tickLoop() {
+    enterRealtime(realtime_priority_, "tick");
     // Under sim time the clock reads zero until the first /clock.
     while (running_ && ros::ok() && ros::Time::now().isZero()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
     ros::Time next = ros::Time::now();
@@ -266,6 +287,7 @@ class PoolRos {
 
   // --- publisher thread ---------------------------------------------------------------
   void publishLoop() {
+    enterRealtime(realtime_priority_ - 1, "publisher");  // the tick first
     std::vector<std::uint16_t> index;
     while (running_) {
       timespec deadline;
@@ -326,6 +348,9 @@ class PoolRos {
     s.add("controller", controller_);
     s.add("cylinders", cylinder_list_);
     s.add("addressing", pool_->valveIndicesResolved() ? "index" : "name");
+    s.add("scheduling", realtime_priority_ == 0 ? "normal (~realtime_priority 0)"
+                        : fifo_refused_         ? "normal (SCHED_FIFO not permitted)"
+                                                : "SCHED_FIFO " + std::to_string(realtime_priority_));
     s.add("publish_rate_hz", window > 0 ? (published - last_published_) / window : 0.0);
     last_published_ = published;
     s.add("ticks", c.ticks);
@@ -359,6 +384,8 @@ class PoolRos {
   ros::WallTimer diag_timer_;
   std::thread tick_, publisher_;
   std::atomic<bool> running_{false};
+  int realtime_priority_ = 15;  // tick thread; the publisher one below (0: normal scheduling)
+  std::atomic<bool> fifo_refused_{false};
   sem_t command_ready_;
   Clock::time_point window_start_;
   // Input verdicts, counted on the callback queue (lock-free: read by the diagnostics).

@@ -511,6 +511,19 @@ KEY_ARMATURE = 0.001
 KEY_PLAN_ARMATURE = 0.05
 
 
+KEY_PITCH = 0.022  # m between key centres
+# y of the row nearest the hand (keys 1 2 3). Every key within the middle three fingertips'
+# reach at press height: sampled over the finger joint ranges, the far row (bs 0 ent) was out
+# of reach at -0.115 (fingertips reach y <= -0.075 there); 5 cm nearer, each key is reached by
+# its column's finger in 65 or more of 600000 configurations, the near row in 260 or more.
+KEYPAD_NEAR_ROW_Y = -0.165
+# Height of the key centres: the keys sit 7.5 mm above the base, which stands on the table.
+KEY_Z = 0.0495
+# x of the middle column (2 5 8 0): the columns under the first, middle and ring fingertips
+# as they hang at the rest keyframe (x -0.033, -0.011, 0.011).
+KEYPAD_MIDDLE_X = -0.011
+
+
 def keypad_xml(planning=False):
     """A 4 x 3 numeric keypad with spring-loaded keys (thesis 6.5): 6 mm travel, a press
     registers only at >= 5.5 mm (custom numeric keypad_press_depth)."""
@@ -519,16 +532,19 @@ def keypad_xml(planning=False):
     keys = []
     for i, label in enumerate(labels):
         row, col = divmod(i, 3)
-        x = (col - 1) * 0.022
-        y = -0.115 + row * 0.022
+        x = KEYPAD_MIDDLE_X + (col - 1) * KEY_PITCH
+        y = KEYPAD_NEAR_ROW_Y + row * KEY_PITCH
         keys.append(
-            f'<body name="key_{label}" pos="{fmt((x, y, 0.0495))}">'
+            f'<body name="key_{label}" pos="{fmt((x, y, KEY_Z))}">'
             f'<joint name="KEY_{label}" type="slide" axis="0 0 1" range="-0.006 0" stiffness="100" '
             f'springref="0.004" damping="0.05" armature="{fmt(armature)}"/>'
             f'<geom name="C_key_{label}" type="box" size="0.009 0.009 0.004" mass="0.005" '
             f'rgba="0.9 0.9 0.85 1" contype="1" conaffinity="1" condim="3"/></body>')
-    base = ('<body name="keypad" pos="0 0 0"><geom name="C_keypad" type="box" pos="0 -0.082 0.019" '
-            'size="0.042 0.052 0.019" rgba="0.2 0.2 0.22 1" contype="1" conaffinity="1"/>'
+    base_y = KEYPAD_NEAR_ROW_Y + 1.5 * KEY_PITCH  # under the middle of the four rows
+    base_half_height = (KEY_Z - 0.0115) / 2
+    base = ('<body name="keypad" pos="0 0 0"><geom name="C_keypad" type="box" '
+            f'pos="{fmt((KEYPAD_MIDDLE_X, base_y, base_half_height))}" '
+            f'size="{fmt((0.042, 0.052, base_half_height))}" rgba="0.2 0.2 0.22 1" contype="1" conaffinity="1"/>'
             + "".join(keys) + "</body>")
     return base, labels
 
@@ -558,11 +574,11 @@ def scenes():
               object_qpos=[0.007, -0.19, 0.31, 1, 0, 0, 0]),
         Scene("ball", "object relocation with the arm: a ball on the table", True,
               (0, -0.85, 0.0), (0, 0, 0),
-              objects=object_body((0, -0.15, 0.035),
+              objects=object_body((0, -0.21, 0.035),
                                   '<geom name="C_object" type="sphere" size="0.035" mass="0.18" '
                                   'rgba="0.85 0.3 0.2 1" contype="1" conaffinity="1" condim="3"/>')
               + '<site name="S_target" pos="0 0 0.2" size="0.035" rgba="0 1 0 0.3" group="2"/>',
-              object_qpos=[0, -0.15, 0.035, 1, 0, 0, 0]),
+              object_qpos=[0, -0.21, 0.035, 1, 0, 0, 0]),
         Scene("keypad", "typing on a numeric keypad with spring-loaded keys (thesis 6.5)", False,
               (0, -0.55, 0.12), PALM_DOWN, objects=pad,
               extra_custom='<numeric name="keypad_press_depth" data="0.0055"/>', plan_objects=plan_pad),

@@ -32,7 +32,7 @@ TaskParams RelocateTask::defaults() {
                {"orientation_axes", {1, 1, 1}},
                {"workspace_min", {-0.35, -0.55, 0.035}},
                {"workspace_max", {0.35, -0.15, 0.4}},
-               {"object_start_position", {0.0, -0.15, 0.035}},
+               {"object_start_position", {0.0, -0.21, 0.035}},
                {"object_start_quat", {1, 0, 0, 0}}};
   return p;
 }

@@ -346,7 +346,7 @@ TEST_F(RelocateOnBall, StagesFollowTheObservedGrasp) {
   task->observe(model.get(), data.get(), 0.0);  // the phase event
   // The ball on the table, the hand at rest far above it: approach. The goal does not count
   // yet: another goal leaves the cost as it is.
-  placeObject({0.0, -0.15, 0.035});
+  placeObject({0.0, -0.21, 0.035});
   EXPECT_TRUE(task->observe(model.get(), data.get(), 0.1).empty());
   EXPECT_EQ(relocate->stage(), adroit_mpc::RelocateTask::Stage::kApproach);
   const double approaching = task->runningCost(model.get(), data.get(), u, 0.0, *scratch);

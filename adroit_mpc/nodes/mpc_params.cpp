@@ -68,7 +68,7 @@ MpcParams readParams(const ros::NodeHandle& pnh) {
   std::set<std::string> keys = {"scene", "model_file", "task", "tasks", "planner", "mode", "threads", "horizon", "dt",
                                  "iterations", "synergies", "derivative_skip", "samples", "noise_scale",
                                  "control_rate", "state_timeout", "feedback_scale", "marker_rate",
-                                 "diagnostics_period", "nice", "lockstep", "physics_timestep", "lockstep_controls_per_plan"};
+                                 "diagnostics_period", "nice", "control_priority", "lockstep", "physics_timestep", "lockstep_controls_per_plan"};
   // dynamic_reconfigure keeps its values (task weights) among the private parameters too.
   for (const auto& d : adroit_mpc::MpcConfig::__getParamDescriptions__()) keys.insert(d->name);
   p.checkKeys("", keys);
@@ -112,6 +112,7 @@ MpcParams readParams(const ros::NodeHandle& pnh) {
   out.marker_rate = p.number("marker_rate", out.marker_rate, 0.0, 60.0);
   out.diagnostics_period = p.number("diagnostics_period", out.diagnostics_period, 0.05, 60.0);
   out.nice = p.integer("nice", out.nice, 0, 19);
+  out.control_priority = p.integer("control_priority", out.control_priority, 0, 98);
   out.lockstep = p.boolean("lockstep", out.lockstep);
   out.physics_timestep = p.number("physics_timestep", out.physics_timestep, 1e-5, 0.1);
   out.lockstep_controls_per_plan = p.integer("lockstep_controls_per_plan", out.lockstep_controls_per_plan, 1, 1000);

@@ -138,11 +138,7 @@ void MpcNode::start() {
     // Before the node's own threads start (they inherit it); the thread pool and roscpp's
     // threads, already running, are set one by one.
     const adroit::BackgroundResult r = adroit::runInBackground(params_.nice);
-    if (!r.error.empty())
-      ROS_WARN("adroit_mpc: ~nice %d: %s", params_.nice, r.error.c_str());
-    else
-      ROS_INFO("adroit_mpc: nice %d (%d threads%s)", params_.nice, r.threads,
-               r.autogroup ? ", and the session's autogroup" : "; the session is shared, its autogroup is left alone");
+    if (!r.error.empty()) ROS_WARN("adroit_mpc: ~nice %d: %s", params_.nice, r.error.c_str());
   }
   running_ = true;
   state_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &state_queue_);
@@ -308,6 +304,17 @@ bool MpcNode::sendPolicyReference(double t, const StateSnapshot& state) {
 }
 
 void MpcNode::controlLoop() {
+  // The optimiser runs at ~nice; the policy must still reach the driver or the pools at the
+  // control rate whatever else runs, so this thread (asleep between periods) is SCHED_FIFO.
+  if (params_.control_priority > 0) {
+    std::string error;
+    if (adroit::enterFifo(params_.control_priority, &error))
+      ROS_INFO("adroit_mpc: control loop under SCHED_FIFO, priority %d", params_.control_priority);
+    else
+      ROS_WARN("adroit_mpc: ~control_priority %d: SCHED_FIFO not permitted (%s); the control loop keeps normal "
+               "scheduling (grant an rtprio limit or CAP_SYS_NICE, or set ~control_priority: 0)",
+               params_.control_priority, error.c_str());
+  }
   using Clock = std::chrono::steady_clock;
   const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / params_.control_rate));
   auto next = Clock::now();

@@ -68,9 +68,10 @@ struct MpcParams {
   double feedback_scale = 1.0;     // of the policy's gains at the control rate
   double marker_rate = 5;          // wall Hz, only while someone listens
   double diagnostics_period = 1.0;  // wall s
-  // Nice value of the whole node and, under roslaunch, of its session's autogroup
-  // (adroit::runInBackground): on two cores the driver and the pools come first.
+  // Nice value of every thread of the node (adroit::runInBackground) but the control loop,
+  // which runs under SCHED_FIFO at control_priority (0: normal scheduling, niced too).
   int nice = 19;
+  int control_priority = 10;  // below the pools' (15) and the driver's (20)
   // Lockstep: drive a paused simulation through /adroit/step.
   bool lockstep = false;
   double physics_timestep = 0.002;  // s, the driver's step

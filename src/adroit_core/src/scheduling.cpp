@@ -9,7 +9,6 @@
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
-#include <fstream>
 
 namespace adroit {
 
@@ -47,15 +46,6 @@ BackgroundResult runInBackground(int nice) {
   } else {
     result.error = std::string("/proc/self/task: ") + std::strerror(errno);
   }
-  if (getsid(0) != getpid()) return result;
-  // No file: the kernel has no autogroup scheduling, and the thread nice values rank as usual.
-  std::ofstream autogroup("/proc/self/autogroup");
-  if (!autogroup) return result;
-  autogroup << nice << std::flush;
-  if (autogroup)
-    result.autogroup = true;
-  else if (result.error.empty())
-    result.error = "/proc/self/autogroup: not permitted";
   return result;
 }
 

@@ -40,10 +40,10 @@ int autogroupNice() {
 
 }  // namespace
 
-TEST(Scheduling, BackgroundReachesThreadsStartedBeforeAndAfterAndTheSessionsAutogroup) {
+TEST(Scheduling, BackgroundReachesThreadsStartedBeforeAndAfterButNotTheSessionsAutogroup) {
   const int code = inChild([] {
-    if (setsid() < 0) return 10;  // this child now leads its own session, as under roslaunch
-    const bool has_autogroup = autogroupNice() != -100;
+    if (setsid() < 0) return 10;  // this child leads its own session, as under roslaunch
+    const int autogroup_before = autogroupNice();
     std::atomic<bool> go{false};
     std::atomic<int> earlier_nice{-1};
     std::thread earlier([&] {
@@ -60,21 +60,31 @@ TEST(Scheduling, BackgroundReachesThreadsStartedBeforeAndAfterAndTheSessionsAuto
     if (r.threads != 2) return 12;  // this thread and `earlier`
     if (threadNice() != 13 || earlier_nice != 13) return 13;
     if (later_nice != 13) return 14;
-    if (has_autogroup && (!r.autogroup || autogroupNice() != 13)) return 15;
+    if (autogroupNice() != autogroup_before) return 15;  // the session keeps its weight
     return 0;
   });
   EXPECT_EQ(code, 0);
 }
 
-TEST(Scheduling, BackgroundLeavesASharedSessionsAutogroupAlone) {
+TEST(Scheduling, FifoThreadKeepsItsPolicyWhenTheProcessGoesToTheBackground) {
   const int code = inChild([] {
-    // Forked, not a session leader: the session is the test runner's.
-    const int before = autogroupNice();
-    const adroit::BackgroundResult r = adroit::runInBackground(11);
-    if (!r.error.empty() || r.autogroup) return 20;
-    if (threadNice() != 11) return 21;
-    if (autogroupNice() != before) return 22;
-    return 0;
+    std::atomic<int> state{0};  // 1: FIFO entered (or refused: 3), 2: background done
+    std::atomic<int> policy{-1};
+    std::thread control([&] {
+      state = adroit::enterFifo(1, nullptr) ? 1 : 3;
+      while (state != 2) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      policy = sched_getscheduler(0);
+    });
+    while (state == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    if (state == 3) {  // no rtprio permitted here: nothing to check
+      state = 2;
+      control.join();
+      return 0;
+    }
+    adroit::runInBackground(19);
+    state = 2;
+    control.join();
+    return policy == SCHED_FIFO ? 0 : 50;
   });
   EXPECT_EQ(code, 0);
 }
@@ -84,7 +94,7 @@ TEST(Scheduling, NiceOutsideTheBackgroundRangeIsRefusedAndChangesNothing) {
     const int before = threadNice();
     for (int bad : {-1, 20}) {
       const adroit::BackgroundResult r = adroit::runInBackground(bad);
-      if (r.error.find("not in [0, 19]") == std::string::npos || r.threads != 0 || r.autogroup) return 30;
+      if (r.error.find("not in [0, 19]") == std::string::npos || r.threads != 0) return 30;
     }
     return threadNice() == before ? 0 : 31;
   });

@@ -72,7 +72,7 @@ TaskParams TypeTask::defaults() {
   p.numbers = {{"w_press", 10.0},        {"w_approach", 20.0},       {"w_hover", 5.0},
                {"w_other_keys", 5.0},    {"w_posture", 0.1},         {"w_control", 0.1},
                {"w_synergy", 0.08},      {"terminal_scale", 5.0},    {"hover_height", 0.015},
-               {"approach_smoothing", 0.005}, {"key_period", 0.25}, {"min_lead", 0.1},
+               {"approach_smoothing", 0.005}, {"key_period", 0.25}, {"min_lead", 1.0},
                {"step_smoothness", 0.03}, {"release_depth", 0.0035}, {"horizon", 0.64},
                {"planner_dt", 0.02}};
   return p;

@@ -164,6 +164,10 @@ TEST_F(Typing, FingerHeatMapFromTheKeypadLayout) {
 }
 
 TEST_F(Typing, StepScheduleFollowsKeyEvents) {
+  adroit_mpc::TaskParams p;
+  p.numbers = {{"key_period", 0.25}, {"min_lead", 0.1}};
+  task = std::make_unique<TypeTask>(p);
+  task->bind(m, 5);
   std::string why;
   ASSERT_TRUE(task->setSequence("123", &why));
   tap("1", 2.0);
@@ -176,6 +180,17 @@ TEST_F(Typing, StepScheduleFollowsKeyEvents) {
   // A slow press: the switch to the next key stays ahead of the latest observation.
   push("2", 0.001, 3.0);
   EXPECT_DOUBLE_EQ(task->currentStep().a2, 3.1);
+}
+
+TEST_F(Typing, DefaultScheduleHoldsADueKeyOverTheWholeHorizon) {
+  std::string why;
+  ASSERT_TRUE(task->setSequence("123", &why));
+  tap("1", 2.0);
+  push("2", 0.001, 2.6);  // 2 is due and late: the plan must not hand over to 3 yet
+  const double horizon = TypeTask::defaults().numbers.at("horizon");
+  const auto step = task->currentStep();
+  EXPECT_GT(step.up(2.6 + horizon), 0.95);
+  EXPECT_EQ(task->currentTarget(), "2");
 }
 
 TEST_F(Typing, CostRewardsTheTargetKeyAndPenalisesOthers) {

@@ -338,11 +338,12 @@ PALM_UP = (-1.5708, 0, 0)
 PALM_UP_TILTED_30 = (-1.5708 - math.radians(30), 0, 0)   # thesis 10.2: ~30 deg to horizontal
 
 
-def arm_and_hand():
-    """4-DOF arm (thesis Table 6.1 joint names) carrying the hand. Link lengths are ours."""
+def arm_and_hand(forearm_euler=PALM_DOWN):
+    """4-DOF arm (thesis Table 6.1 joint names) carrying the hand. Link lengths are ours.
+    forearm_euler: how the hand is mounted on the elbow roll (palm down or up at ARJ0 = 0)."""
     fa = forearm(with_roll_joint=True)
     fa.pos = (0, 0.05, 0)
-    fa.quat = tuple(euler_xyz_to_quat(*PALM_DOWN))
+    fa.quat = tuple(euler_xyz_to_quat(*forearm_euler))
     elbow = Body("arm_elbow", (0, 0.30, 0),
                  joint=Joint("ARJ1", (1, 0, 0), (-1.0, 1.0), moment_arm=0.040, cylinder="M40",
                              damping=5.0, armature=0.05, plan_armature=0.45),
@@ -493,6 +494,7 @@ class Scene:
     table_touches_hand: bool = True
     extra_custom: str = ""
     plan_objects: str = ""        # the planning model's objects, when they differ
+    forearm_euler: Tuple[float, float, float] = PALM_DOWN  # arm scenes: the hand's mount on the elbow roll
 
 
 FREE_OBJECT_JOINT = '<freejoint name="object_root"/>'
@@ -572,13 +574,16 @@ def scenes():
                                   'quat="0.70711 0 0.70711 0" mass="0.25" rgba="0.2 0.5 0.8 1" '
                                   'contype="1" conaffinity="1" condim="3"/>'),
               object_qpos=[0.007, -0.19, 0.31, 1, 0, 0, 0]),
-        Scene("ball", "object relocation with the arm: a ball on the table", True,
-              (0, -0.85, 0.0), (0, 0, 0),
-              objects=object_body((0, -0.21, 0.035),
+        # Relocation starts as a dynamic stabilisation (thesis 6.5): the ball is dropped into
+        # the hand. The elbow roll (+-1.3 rad; pi would need more than the M24's stroke) cannot
+        # turn the palm up, so this scene mounts the hand palm up on the forearm.
+        Scene("ball", "object relocation with the arm: a ball dropped into the palm-up hand", True,
+              (0, -0.85, 0.0), (0, 0, 0), forearm_euler=PALM_UP,
+              objects=object_body((0.007, -0.14, 0.48),
                                   '<geom name="C_object" type="sphere" size="0.035" mass="0.18" '
                                   'rgba="0.85 0.3 0.2 1" contype="1" conaffinity="1" condim="3"/>')
               + '<site name="S_target" pos="0 0 0.2" size="0.035" rgba="0 1 0 0.3" group="2"/>',
-              object_qpos=[0, -0.21, 0.035, 1, 0, 0, 0]),
+              object_qpos=[0.007, -0.14, 0.48, 1, 0, 0, 0]),
         Scene("keypad", "typing on a numeric keypad with spring-loaded keys (thesis 6.5)", False,
               (0, -0.55, 0.12), PALM_DOWN, objects=pad,
               extra_custom='<numeric name="keypad_press_depth" data="0.0055"/>', plan_objects=plan_pad),
@@ -602,7 +607,7 @@ class Mjcf:
         self.scene = scene
         self.planning = planning
         if scene.arm:
-            self.root = arm_and_hand()
+            self.root = arm_and_hand(scene.forearm_euler)
         else:
             self.root = forearm(with_roll_joint=False)
         self.root.pos = scene.mount_pos

@@ -245,17 +245,31 @@ class RelocateOnBall : public ::testing::Test {
   std::unique_ptr<Task> task;
   adroit_mpc::RelocateTask* relocate = nullptr;
   int object_qpos = 0;
-  const Eigen::Vector3d hold{0.0, -0.25, 0.15};  // relocate.yaml
 };
+
+// The scene is set up for a caught object (thesis 6.5): palm up at rest, the ball dropped from
+// above the grasp envelope, the hold position just above the palm.
+TEST_F(RelocateOnBall, TheBallFallsIntoThePalmUpHandAndIsHeldThere) {
+  const int palm = mj_name2id(model.get(), mjOBJ_BODY, "palm");
+  const double* R = data->xmat + 9 * palm;
+  EXPECT_LT(R[7], -0.9);  // the palm's -y (its inner face) points up at rest
+  const Eigen::Vector3d start(data->qpos + object_qpos);
+  const Eigen::Vector3d grasp = graspSite();
+  EXPECT_LT(std::hypot(start.x() - grasp.x(), start.y() - grasp.y()), 0.01);
+  EXPECT_GT(start.z(), grasp.z() + 0.05);
+  EXPECT_LT((relocate->holdPosition() - grasp).norm(), 0.03);
+}
 
 TEST_F(RelocateOnBall, HoldsUntilAGoalThenGoesThere) {
   EXPECT_EQ(relocate->phase(), adroit_mpc::RelocateTask::Phase::kHold);
+  const Eigen::Vector3d hold = relocate->holdPosition();
   placeObject(hold + Eigen::Vector3d(0.03, 0, 0.04));
   EXPECT_NEAR(task->error(model.get(), data.get()), 0.05, 1e-12);
   std::string why;
-  ASSERT_TRUE(task->setGoal({0.1, -0.3, 0.2}, Eigen::Quaterniond::Identity(), &why)) << why;
+  const Eigen::Vector3d goal = hold + Eigen::Vector3d(0.08, -0.05, -0.1);
+  ASSERT_TRUE(task->setGoal(goal, Eigen::Quaterniond::Identity(), &why)) << why;
   EXPECT_EQ(relocate->phase(), adroit_mpc::RelocateTask::Phase::kGoal);
-  placeObject({0.1, -0.3, 0.2});
+  placeObject(goal);
   EXPECT_NEAR(task->error(model.get(), data.get()), 0.0, 1e-12);
   const auto events = task->observe(model.get(), data.get(), 0.0);
   ASSERT_EQ(events.size(), 2u);
@@ -267,148 +281,96 @@ TEST_F(RelocateOnBall, HoldsUntilAGoalThenGoesThere) {
 
 TEST_F(RelocateOnBall, SetGoalRejectsBadGoalsWithAReason) {
   std::string why;
-  EXPECT_FALSE(task->setGoal({NAN, -0.3, 0.2}, Eigen::Quaterniond::Identity(), &why));
+  EXPECT_FALSE(task->setGoal({NAN, -0.2, 0.3}, Eigen::Quaterniond::Identity(), &why));
   EXPECT_NE(why.find("not finite"), std::string::npos) << why;
-  EXPECT_FALSE(task->setGoal({0.0, -0.3, 0.2}, Eigen::Quaterniond(NAN, 0, 0, 0), &why));
+  EXPECT_FALSE(task->setGoal({0.0, -0.2, 0.3}, Eigen::Quaterniond(NAN, 0, 0, 0), &why));
   EXPECT_NE(why.find("orientation"), std::string::npos) << why;
-  EXPECT_FALSE(task->setGoal({0.0, -0.3, 0.2}, Eigen::Quaterniond(0, 0, 0, 0), &why));
+  EXPECT_FALSE(task->setGoal({0.0, -0.2, 0.3}, Eigen::Quaterniond(0, 0, 0, 0), &why));
   EXPECT_NE(why.find("cannot be normalised"), std::string::npos) << why;
-  // S_target of the scene (0, 0, 0.2) is beyond the arm's reach: outside the box.
-  EXPECT_FALSE(task->setGoal({0.0, 0.0, 0.2}, Eigen::Quaterniond::Identity(), &why));
+  // 10 cm beyond the box's far side (y 0), out of the arm's reach.
+  EXPECT_FALSE(task->setGoal({0.0, 0.1, 0.3}, Eigen::Quaterniond::Identity(), &why));
   EXPECT_NE(why.find("outside the workspace box"), std::string::npos) << why;
-  EXPECT_FALSE(task->setGoal({0.0, -0.3, 0.0}, Eigen::Quaterniond::Identity(), &why));  // below the table
+  EXPECT_FALSE(task->setGoal({0.0, -0.2, 0.0}, Eigen::Quaterniond::Identity(), &why));  // at the table
   EXPECT_EQ(why.find('\n'), std::string::npos);
   EXPECT_EQ(relocate->phase(), adroit_mpc::RelocateTask::Phase::kHold);  // nothing taken
 }
 
-TEST_F(RelocateOnBall, ReleaseSwitchesToLeavingTheObject) {
+TEST_F(RelocateOnBall, ReleaseDropsTheGoalAndGraspTermsAndOpensTheHand) {
   auto scratch = task->makeScratch(model.get());
-  const Eigen::VectorXd u = someControl(model.get());
   std::string why;
-  placeObject(graspSite());  // object in the hand
+  // Held at the grasp site, far from a goal: the goal term costs before the release only.
+  ASSERT_TRUE(task->setGoal(relocate->holdPosition() + Eigen::Vector3d(0.1, 0, 0), Eigen::Quaterniond::Identity(),
+                            &why));
+  placeObject(graspSite());
+  const double holding = task->terminalCost(model.get(), data.get(), 0.0, *scratch);
   ASSERT_TRUE(task->release(&why)) << why;
   EXPECT_EQ(relocate->phase(), adroit_mpc::RelocateTask::Phase::kRelease);
   EXPECT_FALSE(task->release(&why));
   EXPECT_NE(why.find("already released"), std::string::npos);
-  // Released: the object in the hand now costs (clearance), the object far away does not.
-  const double in_hand = task->terminalCost(model.get(), data.get(), 0.0, *scratch);
+  const double released = task->terminalCost(model.get(), data.get(), 0.0, *scratch);
+  EXPECT_GT(holding, released + 1.0);
+  // At the rest keyframe and still, the released object costs nothing wherever it is...
+  EXPECT_NEAR(released, 0.0, 1e-12);
   placeObject(graspSite() + Eigen::Vector3d(0, 0, -0.2));
-  const double away = task->terminalCost(model.get(), data.get(), 0.0, *scratch);
-  EXPECT_GT(in_hand, away + 1.0);
-  // At the rest keyframe, far from the object and still: only the (zero) terms remain.
-  EXPECT_NEAR(away, 0.0, 1e-12);
-  // A new goal grasps again.
-  ASSERT_TRUE(task->setGoal({0.0, -0.3, 0.2}, Eigen::Quaterniond::Identity(), &why));
+  EXPECT_NEAR(task->terminalCost(model.get(), data.get(), 0.0, *scratch), 0.0, 1e-12);
+  // ... and fingers curled away from rest do (the hand opens).
+  data->qpos[mj_name2id(model.get(), mjOBJ_JOINT, "FFJ2")] += 0.5;
+  mj_forward(model.get(), data.get());
+  EXPECT_GT(task->terminalCost(model.get(), data.get(), 0.0, *scratch), 0.1);
+  // A new goal takes the object there again.
+  ASSERT_TRUE(task->setGoal(relocate->holdPosition(), Eigen::Quaterniond::Identity(), &why));
   EXPECT_EQ(relocate->phase(), adroit_mpc::RelocateTask::Phase::kGoal);
-  (void)u;
 }
 
-// The ball at the centroid of the thumb tip and the first finger tip of the rest pose: both
-// tips are then equally far from its surface (the gaps of the stage rules).
-Eigen::Vector3d between(const mjModel* m, const mjData* d) {
-  const auto site = [&](const char* name) { return Eigen::Vector3d(d->site_xpos + 3 * mj_name2id(m, mjOBJ_SITE, name)); };
-  return 0.5 * (site("S_thtip") + site("S_fftip"));
+TEST_F(RelocateOnBall, ArmPostureTermHoldsTheArmAndOnlyTheArm) {
+  auto scratch = task->makeScratch(model.get());
+  const Eigen::VectorXd u = Eigen::VectorXd::Zero(model->nu + kSynergies);
+  // What the posture term adds for one joint turned away from rest (the same state with the
+  // term's weight on and off).
+  const auto added = [&](const char* joint, double by) {
+    setKeyframe(model.get(), data.get(), "rest");
+    data->qpos[model->jnt_qposadr[mj_name2id(model.get(), mjOBJ_JOINT, joint)]] += by;
+    mj_forward(model.get(), data.get());
+    placeObject(graspSite());
+    task->setWeight("w_arm_posture", 1.0);
+    const double on = task->runningCost(model.get(), data.get(), u, 0.0, *scratch);
+    task->setWeight("w_arm_posture", 0.0);
+    const double off = task->runningCost(model.get(), data.get(), u, 0.0, *scratch);
+    return on - off;
+  };
+  EXPECT_NEAR(added("ARJ3", 0.0), 0.0, 1e-12);
+  EXPECT_GT(added("ARJ3", 0.2), 0.01);
+  EXPECT_GT(added("ARJ1", -0.2), 0.01);
+  EXPECT_NEAR(added("FFJ2", 0.5), 0.0, 1e-12);  // a finger is free to curl
+  EXPECT_NEAR(added("WRJ0", 0.3), 0.0, 1e-12);  // and the wrist to turn
 }
 
-TEST_F(RelocateOnBall, DerivativesMatchFiniteDifferencesInEveryPhaseAndStage) {
-  // Off the keyframe so the posture term of the release is active.
+TEST_F(RelocateOnBall, DerivativesMatchFiniteDifferencesInEveryPhase) {
+  // Off the keyframe so the posture terms are active.
   for (int j = 0; j < 4; ++j) data->qpos[j] += 0.1 * (j + 1);
   mj_forward(model.get(), data.get());
-  placeObject(between(model.get(), data.get()) + Eigen::Vector3d(0.01, -0.01, 0.02));
+  placeObject(graspSite() + Eigen::Vector3d(0.01, -0.01, 0.02));
   addVelocities(model.get(), data.get(), 0.3);
   const Eigen::VectorXd u = someControl(model.get());
-  ASSERT_EQ(relocate->stage(), adroit_mpc::RelocateTask::Stage::kApproach);
-  checkDerivatives(*task, model.get(), data.get(), u, 0.0, "relocate hold approach");
-  // Generous gaps: the tips around the ball count as holding it -> carry.
-  TaskParams p;
-  p.numbers["hold_gap"] = 0.2;
-  p.numbers["grasp_start_gap"] = 0.2;
-  p.numbers["lost_gap"] = 0.3;
-  auto carrying = adroit_mpc::makeTask("relocate", p);
-  carrying->bind(model.get(), kSynergies);
-  auto* carry = dynamic_cast<adroit_mpc::RelocateTask*>(carrying.get());
-  carrying->observe(model.get(), data.get(), 0.0);
-  ASSERT_EQ(carry->stage(), adroit_mpc::RelocateTask::Stage::kCarry);
-  checkDerivatives(*carrying, model.get(), data.get(), u, 0.0, "relocate hold carry");
+  checkDerivatives(*task, model.get(), data.get(), u, 0.0, "relocate hold");
   std::string why;
-  ASSERT_TRUE(carrying->setGoal({0.05, -0.3, 0.25}, Eigen::Quaterniond::Identity(), &why));
-  carrying->setWeight("w_goal_orientation", 0.5);  // exercise the orientation term too
-  checkDerivatives(*carrying, model.get(), data.get(), u, 0.0, "relocate goal carry");
-  ASSERT_TRUE(carrying->release(&why));
-  checkDerivatives(*carrying, model.get(), data.get(), u, 0.0, "relocate release");
-}
-
-TEST_F(RelocateOnBall, StagesFollowTheObservedGrasp) {
-  auto scratch = task->makeScratch(model.get());
-  const Eigen::VectorXd u = someControl(model.get());
-  std::string why;
-  ASSERT_TRUE(task->setGoal({0.05, -0.3, 0.2}, Eigen::Quaterniond::Identity(), &why));
-  task->observe(model.get(), data.get(), 0.0);  // the phase event
-  // The ball on the table, the hand at rest far above it: approach. The goal does not count
-  // yet: another goal leaves the cost as it is.
-  placeObject({0.0, -0.21, 0.035});
-  EXPECT_TRUE(task->observe(model.get(), data.get(), 0.1).empty());
-  EXPECT_EQ(relocate->stage(), adroit_mpc::RelocateTask::Stage::kApproach);
-  const double approaching = task->runningCost(model.get(), data.get(), u, 0.0, *scratch);
-  ASSERT_TRUE(task->setGoal({-0.1, -0.2, 0.3}, Eigen::Quaterniond::Identity(), &why));
-  EXPECT_EQ(task->runningCost(model.get(), data.get(), u, 0.0, *scratch), approaching);
-  // The ball right between the thumb and the index tip: within the hold gap of both, but the
-  // default needs two fingers; with min_fingers 1 it is held -> carry, with a "stage" event.
-  placeObject(between(model.get(), data.get()));
-  std::vector<double> gaps;
-  relocate->fingertipGaps(data.get(), &gaps);
-  ASSERT_EQ(gaps.size(), 5u);
-  EXPECT_NEAR(gaps[0], gaps[1], 1e-12);  // thumb, first finger
-  TaskParams p;
-  p.numbers["min_fingers"] = 1;
-  p.numbers["hold_gap"] = gaps[0] + 0.001;
-  p.numbers["grasp_start_gap"] = gaps[0] + 0.001;
-  p.numbers["lost_gap"] = gaps[0] + 0.02;
-  p.vectors["goal_position"] = {0.05, -0.3, 0.2};
-  adroit_mpc::RelocateTask one_finger(p);
-  one_finger.bind(model.get(), kSynergies);
-  auto events = one_finger.observe(model.get(), data.get(), 0.2);
-  ASSERT_EQ(events.size(), 2u);
-  EXPECT_EQ(events[1].kind, "stage");
-  EXPECT_EQ(events[1].detail, "carry");
-  EXPECT_EQ(one_finger.stage(), adroit_mpc::RelocateTask::Stage::kCarry);
-  // Carrying, the goal counts: the same state costs more with a goal further away.
-  auto s2 = one_finger.makeScratch(model.get());
-  const double near_goal = one_finger.runningCost(model.get(), data.get(), u, 0.0, *s2);
-  ASSERT_TRUE(one_finger.setGoal({-0.3, -0.5, 0.35}, Eigen::Quaterniond::Identity(), &why));
-  EXPECT_GT(one_finger.runningCost(model.get(), data.get(), u, 0.0, *s2), near_goal + 1.0);
-  // The ball slips a few mm (within the lost gap): still carried, no event.
-  placeObject(between(model.get(), data.get()) + Eigen::Vector3d(0, 0, -0.005));
-  EXPECT_TRUE(one_finger.observe(model.get(), data.get(), 0.3).empty());
-  EXPECT_EQ(one_finger.stage(), adroit_mpc::RelocateTask::Stage::kCarry);
-  // Lost (10 cm away from the tips): back to approach.
-  placeObject(between(model.get(), data.get()) + Eigen::Vector3d(0, 0, -0.1));
-  events = one_finger.observe(model.get(), data.get(), 0.4);
-  ASSERT_EQ(events.size(), 1u);
-  EXPECT_EQ(events[0].detail, "approach");
-  // A planner's copy takes the stage along.
-  auto copy = one_finger.clone();
-  placeObject(between(model.get(), data.get()));
-  one_finger.observe(model.get(), data.get(), 0.5);
-  copy->copyParametersFrom(one_finger);
-  EXPECT_EQ(dynamic_cast<adroit_mpc::RelocateTask&>(*copy).stage(), adroit_mpc::RelocateTask::Stage::kCarry);
-  // Released: no stages any more, the phase rules.
-  ASSERT_TRUE(one_finger.release(&why));
-  events = one_finger.observe(model.get(), data.get(), 0.6);
-  ASSERT_EQ(events.size(), 1u);
-  EXPECT_EQ(events[0].kind, "phase");
+  ASSERT_TRUE(task->setGoal({0.05, -0.2, 0.35}, Eigen::Quaterniond::Identity(), &why));
+  task->setWeight("w_goal_orientation", 0.5);  // exercise the orientation term too
+  checkDerivatives(*task, model.get(), data.get(), u, 0.0, "relocate goal");
+  ASSERT_TRUE(task->release(&why));
+  checkDerivatives(*task, model.get(), data.get(), u, 0.0, "relocate release");
 }
 
 TEST_F(RelocateOnBall, CopyParametersCopiesGoalPhaseAndWeights) {
   auto planner_copy = task->clone();
   std::string why;
-  ASSERT_TRUE(task->setGoal({0.1, -0.3, 0.2}, Eigen::Quaterniond::Identity(), &why));
+  ASSERT_TRUE(task->setGoal({0.1, -0.2, 0.3}, Eigen::Quaterniond::Identity(), &why));
   task->setWeight("w_grasp", 3.5);
   ASSERT_TRUE(task->release(&why));
   planner_copy->copyParametersFrom(*task);
   auto* copy = dynamic_cast<adroit_mpc::RelocateTask*>(planner_copy.get());
   EXPECT_EQ(copy->phase(), adroit_mpc::RelocateTask::Phase::kRelease);
-  EXPECT_EQ(copy->goalPosition(), Eigen::Vector3d(0.1, -0.3, 0.2));
+  EXPECT_EQ(copy->goalPosition(), Eigen::Vector3d(0.1, -0.2, 0.3));
   EXPECT_EQ(copy->weight("w_grasp"), 3.5);
   auto other = adroit_mpc::makeTask("catch", {});
   EXPECT_THROW(planner_copy->copyParametersFrom(*other), std::invalid_argument);
@@ -416,7 +378,7 @@ TEST_F(RelocateOnBall, CopyParametersCopiesGoalPhaseAndWeights) {
 
 TEST(RelocateParams, GoalInTheParametersSkipsHold) {
   TaskParams p;
-  p.vectors["goal_position"] = {0.1, -0.3, 0.2};
+  p.vectors["goal_position"] = {0.1, -0.2, 0.3};
   adroit_mpc::RelocateTask task(p);
   EXPECT_EQ(task.phase(), adroit_mpc::RelocateTask::Phase::kGoal);
   p.vectors["goal_position"] = {0.1, 0.3, 0.2};

@@ -60,6 +60,7 @@
 #include <adroit_description/scenes.h>
 #include <adroit_driver/simulated_robot.h>
 #include <adroit_pneumatics/params_io.h>
+#include <adroit_pneumatics/plant.h>
 #include <adroit_pneumatics/pool.h>
 #include <adroit_mpc/planner.h>
 #include <adroit_mpc/planning_model.h>
@@ -148,6 +149,44 @@ std::vector<TrialSpec> makeTrials(const std::string& task, int n, unsigned seed)
     }
   }
   return trials;
+}
+
+// The largest steady pressure a cylinder of this type reaches at the pools' command limit
+// (the seal leak included; one cylinder alone barely sags the supply), locked at mid-stroke,
+// Pa absolute.
+double steadyMaxPressure(const std::string& type) {
+  pneumatics::PlantOptions o;
+  o.area_spread = o.offset_spread = 0;
+  pneumatics::PneumaticPlant plant({pneumatics::cylinderSpec(type)}, {}, 1, o);
+  const double full = pneumatics::IlqgParams{}.u_max, travel = 0.5 * plant.spec(0).stroke, rate = 0;
+  for (int k = 0; k < 2500; ++k) plant.step(0.002, &full, &travel, &rate);  // 5 s
+  return plant.pressure()[0];
+}
+
+// Physical bound of pneumatic relocation: the shoulder's gravity torque at the start pose
+// against what its flexor cylinder can hold with the valve fully open.
+void printShoulderBound(const std::string& scene_file) {
+  adroit::ModelPtr model = adroit::loadModelFile(scene_file).model;
+  adroit::DataPtr data = adroit::makeData(model.get());
+  const mjModel* m = model.get();
+  mjData* d = data.get();
+  const int key = mj_name2id(m, mjOBJ_KEY, "rest");
+  const int joint = mj_name2id(m, mjOBJ_JOINT, "ARJ2"), flexor = mj_name2id(m, mjOBJ_ACTUATOR, "A_ARJ2_flex");
+  if (key < 0 || joint < 0 || flexor < 0) return;
+  mju_copy(d->qpos, m->key_qpos + key * m->nq, m->nq);
+  mj_forward(m, d);
+  const int dof = m->jnt_dofadr[joint];
+  const double gravity = std::abs(d->qfrc_bias[dof]);               // zero velocity: gravity only
+  const double arm = std::abs(d->actuator_moment[flexor * m->nv + dof]);  // tendon moment arm [m]
+  const double nominal = m->actuator_ctrlrange[2 * flexor + 1];     // force mode's limit [N]
+  const pneumatics::CylinderSpec spec = pneumatics::cylinderSpec("M40");
+  const double steady = (steadyMaxPressure("M40") - pneumatics::constants::kAtmosphere) * spec.bore_area;
+  std::printf("relocate, pneumatic: the shoulder (ARJ2) holds the arm at rest against %.1f N m of gravity; its\n"
+              "  flexor gives %.1f N m at the force-mode limit (%.0f N) and at most %.1f N m in pneumatic mode (%.0f N:\n"
+              "  the M40's steady pressure at the pools' %.1f V command limit, leak included). Holding the arm takes\n"
+              "  %.0f %% of the force-mode torque and %.0f %% of the pneumatic one.\n",
+              gravity, nominal * arm, nominal, steady * arm, steady, pneumatics::IlqgParams{}.u_max,
+              100 * gravity / (nominal * arm), 100 * gravity / (steady * arm));
 }
 
 class TrialRunner {
@@ -587,6 +626,11 @@ int main(int argc, char** argv) {
       }
       std::printf("relocate: goals %.3f-%.3f m from the hold position (a ball left there misses every one)\n",
                   nearest, farthest);
+      for (const auto& variant : variants)
+        if (variant.pneumatic) {
+          printShoulderBound(adroit::description::sceneFile(descriptionShareDir(), "ball", false));
+          break;
+        }
     }
     for (const auto& variant : variants) {
       TrialRunner runner(task, variant, overrides, contact_margin, contact_softness);

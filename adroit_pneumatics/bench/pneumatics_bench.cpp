@@ -6,7 +6,8 @@
 //   3. tracking: iLQG vs PIDF on a locked leak-free cylinder and on the leaky moving M9
 //      with the model identified on the locked one (thesis 5.6.2), figs. 5.15-5.17
 //   4. pool timing: 1x48, 6x8, 12x4, 48x1 pools re-solving every 5 ms (fig. 5.20)
-// Usage: pneumatics_bench [--quick] [--only plant|id|track|pool] [--limit V]
+// Usage: pneumatics_bench [--quick] [--only plant|id|types|track|pool] [--limit V]
+//   --only types: eq. 5.5 identified per cylinder type (M9, M16, M24, M40); not in the default run
 //   --limit: command limit of both controllers in the tracking tables (default 2 V, 5.6.3)
 #include <algorithm>
 #include <atomic>
@@ -87,9 +88,11 @@ struct Rig {
   bool moving = false;
   std::uint64_t seed = 1;
   bool relock = false;  // locked, but re-locked at another travel every 5 s (identification)
+  std::string type = "M9";  // cylinder of the catalogue (its valve, bore, stroke, leak)
 };
 
-// One M9 cylinder with its valve, tube delay, supply and sensors, stepped at kSub.
+// One cylinder (M9 unless the rig says otherwise) with its valve, tube delay, supply and
+// sensors, stepped at kSub.
 class Cylinder {
  public:
   explicit Cylinder(const Rig& rig)
@@ -135,7 +138,7 @@ class Cylinder {
 
  private:
   static PneumaticPlant makePlant(const Rig& rig) {
-    CylinderSpec s = cylinderSpec("M9");
+    CylinderSpec s = cylinderSpec(rig.type);
     if (!rig.leak) s.leak_area = 0.0;
     PlantOptions o;
     o.initial_volts = -2.0;
@@ -456,6 +459,41 @@ PoolTiming poolTiming(const ParametricModel& model, int pools, double seconds) {
   return all;
 }
 
+// Identification of eq. 5.5 + dead time per cylinder type, as the M9 model of section 2
+// (leaky; a slow sweep not moving, random commands moving), and the 2 s open-loop prediction
+// error on a fresh recording of the type: with its own model and with the M9's.
+void typesIdentification(bool quick) {
+  const double id_s = quick ? 30 : 60;
+  FitOptions opt;
+  opt.fit_volume = true;
+  const Rig m9_moving{"M9 leaky moving", true, true, 11};
+  const FitReport m9 = fitParametricModel(record({"", true, false, 11}, "sweep", 40, 1),
+                                          record(m9_moving, "random", id_s, 2), opt);
+  const double range = 620e3 - constants::kAtmosphere;
+  std::printf("Identification per cylinder type (eq. 5.5 + dead time, as the M9 model; 2 s open-loop windows on a\n"
+              "fresh +-3 V random recording of the type, %% of working range %.0f kPa)\n", range / 1e3);
+  std::printf("  %-6s %16s %16s\n", "type", "own model %", "M9 model %");
+  std::string yaml;
+  for (const char* type : {"M9", "M16", "M24", "M40"}) {
+    Rig still{"", true, false, 11}, moving{"", true, true, 11};
+    still.type = moving.type = type;
+    const FitReport own = std::string(type) == "M9"
+                              ? m9
+                              : fitParametricModel(record(still, "sweep", 40, 1), record(moving, "random", id_s, 2), opt);
+    const Recording test = record(moving, "random", 40, 9);
+    const double e_own = predictionRmse(test, ParametricModel(own.params)).percent;
+    const double e_m9 = predictionRmse(test, ParametricModel(m9.params)).percent;
+    std::printf("  %-6s %16.2f %16.2f\n", type, e_own, e_m9);
+    const ParametricParams& q = own.params;
+    char line[512];
+    std::snprintf(line, sizeof line,
+                  "  %s: {c2: %.4g, c3: %.4g, c4: %.4g, c5: %.4g, c6: %.4g, c7: %.4g, c8: %.4g, c9: %.4g, cg: %.4g, td: %.4g}\n",
+                  type, q.c2, q.c3, q.c4, q.c5, q.c6, q.c7, q.c8, q.c9, q.cg, q.td);
+    yaml += line;
+  }
+  std::printf("Parameters per type:\n%s\n", yaml.c_str());
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -468,6 +506,7 @@ int main(int argc, char** argv) {
     else if (a == "--limit" && i + 1 < argc) g_limit = std::atof(argv[++i]);
   }
   const auto want = [&](const char* s) { return only.empty() || only == s; };
+  const auto want_only = [&](const char* s) { return only == s; };  // sections not in the default run
   std::printf("== adroit_pneumatics benchmark%s ==\n\n", quick ? " (quick)" : "");
 
   // 1. Plant cost.
@@ -478,6 +517,11 @@ int main(int argc, char** argv) {
     result("plant_step_48_us", step_us, "us", "<=", 3.0);
     std::printf("\n");
   }
+
+  // 2c. The other cylinder types (wrist M16, arm M24 / M40 on valve 2): the same procedure as
+  // the M9's, against the M9 model that every pool ran before. Prints the per-cylinder YAML
+  // of config/parametric_default.yaml.
+  if (want_only("types")) typesIdentification(quick);
 
   // 2. Identification on the leaky M9 (noise, tube delay, valve spread, piston motion on).
   const Rig airpel{"M9 leaky moving", true, true, 11};

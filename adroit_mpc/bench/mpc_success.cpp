@@ -57,6 +57,7 @@
 // positions, for render_states). Ends with RESULT lines (DESIGN.md section 5).
 #include <adroit_core/mujoco_model.h>
 #include <adroit_core/timing_stats.h>
+#include <adroit_description/cylinders.h>
 #include <adroit_description/scenes.h>
 #include <adroit_driver/simulated_robot.h>
 #include <adroit_pneumatics/params_io.h>
@@ -179,13 +180,16 @@ void printShoulderBound(const std::string& scene_file) {
   const double gravity = std::abs(d->qfrc_bias[dof]);               // zero velocity: gravity only
   const double arm = std::abs(d->actuator_moment[flexor * m->nv + dof]);  // tendon moment arm [m]
   const double nominal = m->actuator_ctrlrange[2 * flexor + 1];     // force mode's limit [N]
-  const pneumatics::CylinderSpec spec = pneumatics::cylinderSpec("M40");
-  const double steady = (steadyMaxPressure("M40") - pneumatics::constants::kAtmosphere) * spec.bore_area;
+  std::string type;
+  for (const auto& c : adroit::description::cylinderTable(m))
+    if (c.actuator == flexor) type = c.type;
+  const pneumatics::CylinderSpec spec = pneumatics::cylinderSpec(type);
+  const double steady = (steadyMaxPressure(type) - pneumatics::constants::kAtmosphere) * spec.bore_area;
   std::printf("relocate, pneumatic: the shoulder (ARJ2) holds the arm at rest against %.1f N m of gravity; its\n"
               "  flexor gives %.1f N m at the force-mode limit (%.0f N) and at most %.1f N m in pneumatic mode (%.0f N:\n"
-              "  the M40's steady pressure at the pools' %.1f V command limit, leak included). Holding the arm takes\n"
+              "  the %s's steady pressure at the pools' %.1f V command limit, leak included). Holding the arm takes\n"
               "  %.0f %% of the force-mode torque and %.0f %% of the pneumatic one.\n",
-              gravity, nominal * arm, nominal, steady * arm, steady, pneumatics::IlqgParams{}.u_max,
+              gravity, nominal * arm, nominal, steady * arm, steady, type.c_str(), pneumatics::IlqgParams{}.u_max,
               100 * gravity / (nominal * arm), 100 * gravity / (steady * arm));
 }
 

@@ -13,6 +13,7 @@ TaskParams RelocateTask::defaults() {
                {"w_release_posture", 0.5}, {"w_arm_posture", 1.0},
                {"terminal_scale", 10.0},   {"velocity_angular_scale", 0.035},
                {"position_smoothing", 0.02}, {"grasp_smoothing", 0.02}, {"goal_tolerance", 0.02},
+               {"reach_radius", 0.25},
                {"horizon", 0.3},           {"planner_dt", 0.02},
                {"object_mass", 0.18},      {"object_radius", 0.035}};
   p.vectors = {{"goal_position", {}},
@@ -39,6 +40,7 @@ RelocateTask::RelocateTask(const TaskParams& params) : ObjectTaskBase("relocate"
   w_release_posture_ = weights_.index("w_release_posture");
   w_arm_posture_ = weights_.index("w_arm_posture");
   goal_tolerance_ = paramNumber(task, p, "goal_tolerance", 0, 1);
+  reach_radius_ = paramNumber(task, p, "reach_radius", 0.01, 10);
   release_keyframe_ = paramString(task, p, "release_keyframe");
   arm_joint_prefix_ = paramString(task, p, "arm_joint_prefix");
   hold_position_ = paramVector3(task, p, "hold_position");
@@ -78,6 +80,7 @@ void RelocateTask::copyParametersFrom(const Task& other) {
   if (!source) throw std::invalid_argument("task relocate: cannot copy the parameters of task " + other.name());
   copyBaseFrom(*source);
   phase_ = source->phase_;
+  in_reach_ = source->in_reach_;
 }
 
 bool RelocateTask::setGoal(const Eigen::Vector3d& position, const Eigen::Quaterniond& orientation,
@@ -115,6 +118,11 @@ std::vector<TaskEvent> RelocateTask::observe(const mjModel* m, const mjData* d, 
     events.push_back({"phase", phaseName(phase_)});
     phase_reported_ = true;
     reported_phase_ = phase_;
+  }
+  const bool in_reach = (object_point_.position(d) - grasp_point_.position(d)).norm() <= reach_radius_;
+  if (in_reach != in_reach_) {
+    in_reach_ = in_reach;
+    events.push_back({"object", in_reach ? "in reach" : "out of reach"});
   }
   if (phase_ == Phase::kGoal && !goal_reached_reported_) {
     const double distance = error(m, d);

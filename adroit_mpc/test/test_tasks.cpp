@@ -345,6 +345,41 @@ TEST_F(RelocateOnBall, ArmPostureTermHoldsTheArmAndOnlyTheArm) {
   EXPECT_NEAR(added("WRJ0", 0.3), 0.0, 1e-12);  // and the wrist to turn
 }
 
+TEST_F(RelocateOnBall, AnObjectOutOfReachIsLeftAlone) {
+  auto scratch = task->makeScratch(model.get());
+  const Eigen::VectorXd u = Eigen::VectorXd::Zero(model->nu + kSynergies);
+  std::string why;
+  // In the hand: the goal counts (a goal further away costs more).
+  placeObject(graspSite());
+  EXPECT_TRUE(task->observe(model.get(), data.get(), 0.0).size() == 1u);  // the phase only
+  EXPECT_TRUE(relocate->objectInReach());
+  const double near_goal = task->runningCost(model.get(), data.get(), u, 0.0, *scratch);
+  ASSERT_TRUE(task->setGoal(relocate->holdPosition() + Eigen::Vector3d(0.1, 0, 0), Eigen::Quaterniond::Identity(),
+                            &why));
+  EXPECT_GT(task->runningCost(model.get(), data.get(), u, 0.0, *scratch), near_goal + 0.1);
+  // On the floor, 1 m away: out of reach, reported once; neither goal nor grasp hint pulls.
+  placeObject({0.3, 0.5, -0.7});
+  auto events = task->observe(model.get(), data.get(), 0.1);
+  ASSERT_FALSE(events.empty());
+  EXPECT_EQ(events.back().kind, "object");
+  EXPECT_EQ(events.back().detail, "out of reach");
+  EXPECT_FALSE(relocate->objectInReach());
+  EXPECT_TRUE(task->observe(model.get(), data.get(), 0.2).empty());
+  const double away = task->runningCost(model.get(), data.get(), u, 0.0, *scratch);
+  ASSERT_TRUE(task->setGoal(relocate->holdPosition(), Eigen::Quaterniond::Identity(), &why));
+  EXPECT_EQ(task->runningCost(model.get(), data.get(), u, 0.0, *scratch), away);
+  // A planner's copy waits too; back in the hand, the terms return.
+  auto copy = task->clone();
+  copy->copyParametersFrom(*task);
+  EXPECT_FALSE(dynamic_cast<adroit_mpc::RelocateTask&>(*copy).objectInReach());
+  placeObject(graspSite());
+  events = task->observe(model.get(), data.get(), 0.3);
+  ASSERT_FALSE(events.empty());
+  EXPECT_EQ(events[0].kind, "object");
+  EXPECT_EQ(events[0].detail, "in reach");  // (then goal_reached: the hold is 1.5 cm above the site)
+  EXPECT_TRUE(relocate->objectInReach());
+}
+
 TEST_F(RelocateOnBall, DerivativesMatchFiniteDifferencesInEveryPhase) {
   // Off the keyframe so the posture terms are active.
   for (int j = 0; j < 4; ++j) data->qpos[j] += 0.1 * (j + 1);

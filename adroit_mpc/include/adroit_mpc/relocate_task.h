@@ -9,6 +9,9 @@
 // In every phase a small posture term draws the arm joints (arm_joint_prefix) to the
 // release keyframe: an object position leaves the arm redundant, and without it the arm drifts
 // through its null space until the hand loses the object.
+// An object further than reach_radius from the grasp site (dropped to the floor, or not yet
+// placed) switches the goal and grasp terms off until it is back within reach: the hand waits
+// at rest instead of straining after it.
 // A goal given in the parameters (goal_position) skips the hold phase.
 // Parameters and defaults: config/tasks/relocate.yaml (defaultTaskParams("relocate")).
 #pragma once
@@ -32,16 +35,18 @@ class RelocateTask : public ObjectTaskBase {
   bool setGoal(const Eigen::Vector3d& position, const Eigen::Quaterniond& orientation, std::string* why) override;
   bool release(std::string* why) override;
   // Events: {"phase", "hold" | "goal" | "release"} on each change, {"goal_reached", "<m>"} once
-  // per goal when the object is within goal_tolerance of it.
+  // per goal when the object is within goal_tolerance of it, {"object", "out of reach" |
+  // "in reach"} when it leaves or comes back within reach_radius.
   std::vector<TaskEvent> observe(const mjModel* m, const mjData* d, double t) override;
 
   Phase phase() const { return phase_; }
+  bool objectInReach() const { return in_reach_; }
   static const char* phaseName(Phase phase);
   const Eigen::Vector3d& holdPosition() const { return hold_position_; }
 
  protected:
-  bool goalTermsActive() const override { return phase_ != Phase::kRelease; }
-  bool graspHintActive() const override { return phase_ != Phase::kRelease; }
+  bool goalTermsActive() const override { return phase_ != Phase::kRelease && in_reach_; }
+  bool graspHintActive() const override { return phase_ != Phase::kRelease && in_reach_; }
   double extraStateCost(const mjModel* m, const mjData* d, double scale, ResidualBuffer& buf,
                         CostDerivatives* out) const override;
 
@@ -49,7 +54,8 @@ class RelocateTask : public ObjectTaskBase {
   Phase phase_ = Phase::kHold;
   Eigen::Vector3d hold_position_;
   Eigen::Quaterniond hold_orientation_;
-  double goal_tolerance_;
+  double goal_tolerance_, reach_radius_;
+  bool in_reach_ = true;
   int w_release_posture_, w_arm_posture_;
   std::string release_keyframe_, arm_joint_prefix_;
   // observe() bookkeeping (node side)

@@ -44,7 +44,8 @@
 //             never falls below the palm (z >= 0.2 m) and ends within 3 cm of the goal;
 //   relocate  (thesis 6.5: relocation starts as a dynamic stabilisation) the ball released
 //             4-9 cm above the hold position in the palm-up hand, +-1.5 cm sideways; the goal,
-//             5-12 cm from the hold position, given 1 s later (setGoal, as a user would);
+//             at least 5 cm from the hold position (x +-8, y +-6, z -10..0 cm), given 1 s
+//             later (setGoal, as a user would);
 //             4 s; success: the ball never falls below the palm (z >= 0.3 m) and ends within
 //             3 cm of the goal (the program prints how far the goals are from the hold: what
 //             staying put would score);
@@ -165,7 +166,7 @@ double steadyMaxPressure(const std::string& type) {
 }
 
 // Physical bound of pneumatic relocation: the shoulder's gravity torque at the start pose
-// against what its flexor cylinder can hold with the valve fully open.
+// against what its flexor cylinder can hold at the pools' command limit.
 void printShoulderBound(const std::string& scene_file) {
   adroit::ModelPtr model = adroit::loadModelFile(scene_file).model;
   adroit::DataPtr data = adroit::makeData(model.get());

@@ -1,6 +1,7 @@
 // Benchmarks of adroit_pneumatics (a program, not a test). Prints the tables and one
 // RESULT line per required figure (DESIGN.md section 5):
-//   1. plant step cost for 48 cylinders at the driver's 2 ms step
+//   1. plant step cost for 48 cylinders at the driver's 2 ms step, and its accuracy where a
+//      chamber near dead volume fills or empties
 //   2. identification: 2 s open-loop prediction RMSE of the parametric model identified
 //      from the plant model's data (noise and tube delay on), thesis table 4.5
 //   3. tracking: iLQG vs PIDF on a locked leak-free cylinder and on the leaky moving M9
@@ -16,6 +17,7 @@
 #include <condition_variable>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <random>
@@ -57,13 +59,23 @@ void result(const std::string& name, double value, const char* unit, const char*
 }
 
 // ---------------------------------------------------------------- 1. plant step cost
-double plantStepMicros() {
+// Cost of one 2 ms step of 48 cylinders (40 M9 + 8 M24), with the plant's transient step
+// (PlantOptions::transient_threshold) and without it, in alternating blocks so both see the
+// same machine load. at_dead_volume: every piston at full retraction and square-wave
+// commands (+-3 V at 100 Hz), so every command change is a fast transient; otherwise
+// pistons across the stroke and smooth 200 Hz commands (the hand in normal use).
+struct StepCost {
+  double with_transients = 0, two_stage = 0;  // us, medians of the blocks
+};
+StepCost plantStepMicros(bool at_dead_volume) {
   std::vector<CylinderSpec> specs(40, cylinderSpec("M9"));
   for (int i = 0; i < 8; ++i) specs.push_back(cylinderSpec("M24"));
-  PneumaticPlant plant(specs, SupplyParams{}, 1);
+  PlantOptions two_stage_options;
+  two_stage_options.transient_threshold = std::numeric_limits<double>::infinity();
+  PneumaticPlant plants[2] = {PneumaticPlant(specs, SupplyParams{}, 1), PneumaticPlant(specs, SupplyParams{}, 1, two_stage_options)};
   std::vector<double> x(48), v(48, 0.0);
-  for (int i = 0; i < 48; ++i) x[i] = 0.5 * specs[i].stroke * (0.3 + 1.4 * i / 47.0);
-  adroit::SampleStats blocks;
+  for (int i = 0; i < 48; ++i) x[i] = at_dead_volume ? 0.0 : 0.5 * specs[i].stroke * (0.3 + 1.4 * i / 47.0);
+  adroit::SampleStats blocks[2];
   const int steps = 2500;  // one block = 5 s of simulated time
   std::vector<double> u(static_cast<std::size_t>(steps) * 48);
   for (int b = 0; b < 20; ++b) {
@@ -71,14 +83,60 @@ double plantStepMicros() {
     // timed): a new 200 Hz command every 2.5 steps of 2 ms.
     for (int k = 0; k < steps; ++k) {
       const int at = k - k % 5 + (k % 5 >= 3 ? 3 : 0);
-      for (int i = 0; i < 48; ++i) u[k * 48 + i] = 2.5 * std::sin(0.013 * (b * steps + at) + 0.7 * i);
+      for (int i = 0; i < 48; ++i)
+        u[k * 48 + i] = at_dead_volume ? ((k / 5 + i) % 2 ? 3.0 : -3.0) : 2.5 * std::sin(0.013 * (b * steps + at) + 0.7 * i);
     }
-    adroit::Stopwatch sw;
-    for (int k = 0; k < steps; ++k) plant.step(0.002, &u[k * 48], x.data(), v.data());
-    blocks.add(sw.elapsed() / steps);
+    for (int which : {b % 2, 1 - b % 2}) {
+      adroit::Stopwatch sw;
+      for (int k = 0; k < steps; ++k) plants[which].step(0.002, &u[k * 48], x.data(), v.data());
+      blocks[which].add(sw.elapsed() / steps);
+    }
   }
-  std::printf("Plant step blocks (us): %s\n", adroit::formatSummary(blocks.summary(), 1e6, "").c_str());
-  return blocks.summary().median * 1e6;
+  std::printf("  %-44s with transient step %s; two-stage only %s\n",
+              at_dead_volume ? "at dead volume, +-3 V square wave" : "across the stroke, smooth commands",
+              adroit::formatSummary(blocks[0].summary(), 1e6, "").c_str(),
+              adroit::formatSummary(blocks[1].summary(), 1e6, "").c_str());
+  return {blocks[0].summary().median * 1e6, blocks[1].summary().median * 1e6};
+}
+
+// Accuracy of the 2 ms step where it is hardest (issue 12, item 4): a chamber at or near its
+// dead volume filling from the room (u > 0) or emptying from the supply (u < 0), every
+// catalogue type, against RK4 at 0.1 us on the exact flow function. Largest error over the
+// first five 2 ms samples, % of the working range, with and without the transient step.
+double deadVolumeAccuracy() {
+  const double range = 620e3 - constants::kAtmosphere, dt = 2e-3;
+  std::printf("  %-6s %24s %24s\n", "type", "transient step %", "two-stage only %");
+  double worst_all = 0;
+  for (const char* type : {"M9", "M16", "M24", "M40"}) {
+    const CylinderSpec s = cylinderSpec(type);
+    double worst = 0, worst_two_stage = 0;
+    for (double travel : {0.0, 0.0005, 0.002}) {
+      for (double u : {-5.0, -2.0, -1.0, -0.5, -0.2, 0.2, 0.5, 1.0, 2.0, 3.0, 5.0}) {
+        ChamberInputs in;
+        in.inlet_area = s.valve.inlet(u);
+        in.outlet_area = s.valve.exhaust(u) + s.leak_area;
+        in.volume = s.dead_volume + s.bore_area * travel;
+        in.supply = 620e3;
+        const double p0 = u > 0 ? constants::kAtmosphere : 620e3;
+        double p = p0, old = p0, ref = p0;
+        for (int k = 0; k < 5; ++k) {
+          p = chamberStep(p, dt, in);
+          old = chamberStep(old, dt, in, nullptr, std::numeric_limits<double>::infinity());
+          for (int j = 0; j < 20000; ++j) {  // RK4, 0.1 us
+            const double h = dt / 20000;
+            const double k1 = chamberPressureRate(ref, in), k2 = chamberPressureRate(ref + h / 2 * k1, in);
+            const double k3 = chamberPressureRate(ref + h / 2 * k2, in), k4 = chamberPressureRate(ref + h * k3, in);
+            ref += h / 6 * (k1 + 2 * k2 + 2 * k3 + k4);
+          }
+          worst = std::max(worst, std::abs(p - ref));
+          worst_two_stage = std::max(worst_two_stage, std::abs(old - ref));
+        }
+      }
+    }
+    std::printf("  %-6s %24.2f %24.2f\n", type, 100 * worst / range, 100 * worst_two_stage / range);
+    worst_all = std::max(worst_all, worst);
+  }
+  return 100 * worst_all / range;
 }
 
 // ---------------------------------------------------------------- cylinder rigs
@@ -511,10 +569,19 @@ int main(int argc, char** argv) {
 
   // 1. Plant cost.
   if (want("plant")) {
-    const double step_us = plantStepMicros();
-    std::printf("Plant step, 40 x M9 + 8 x M24, dt 2 ms, new commands at 200 Hz: %.2f us per step (median of 20 blocks)\n\n",
-                step_us);
-    result("plant_step_48_us", step_us, "us", "<=", 3.0);
+    std::printf("Plant step, 40 x M9 + 8 x M24, dt 2 ms, new commands at 200 Hz (us per step, 20 blocks of 5 s each,\n"
+                "alternating)\n");
+    const StepCost normal = plantStepMicros(false);
+    const StepCost transients = plantStepMicros(true);
+    std::printf("  transient step / two-stage only: %.2f across the stroke, %.2f at dead volume\n\n",
+                normal.with_transients / normal.two_stage, transients.with_transients / transients.two_stage);
+    std::printf("Step accuracy near dead volume: a chamber at 0 / 0.5 / 2 mm travel filling from the room or emptying\n"
+                "from the supply, 11 commands; largest error of the first five 2 ms samples against RK4 at 0.1 us,\n"
+                "%% of the working range\n");
+    const double worst = deadVolumeAccuracy();
+    std::printf("\n");
+    result("plant_step_48_us", normal.with_transients, "us", "<=", 3.0);
+    result("plant_dead_volume_step_error_pct", worst, "%", "<=", 2.0);
     std::printf("\n");
   }
 

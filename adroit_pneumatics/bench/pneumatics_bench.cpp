@@ -6,7 +6,8 @@
 //      from the plant model's data (noise and tube delay on), thesis table 4.5
 //   3. tracking: iLQG vs PIDF on a locked leak-free cylinder and on the leaky moving M9
 //      with the model identified on the locked one (thesis 5.6.2), figs. 5.15-5.17
-//   4. pool timing: 1x48, 6x8, 12x4, 48x1 pools re-solving every 5 ms (fig. 5.20)
+//   4. pool timing: 1x48, 6x8, 12x4, 48x1 pools re-solving every 5 ms (fig. 5.20), each next
+//      to a bare thread keeping the same schedule just before it
 // Usage: pneumatics_bench [--quick] [--only plant|id|types|track|pool] [--limit V]
 //   --only types: eq. 5.5 identified per cylinder type (M9, M16, M24, M40); not in the default run
 //   --limit: command limit of both controllers in the tracking tables (default 2 V, 5.6.3)
@@ -426,8 +427,13 @@ struct PoolTiming {
   int missed = 0;
 };
 
+// pools == 0: the platform reference, one bare thread woken on the same schedule by the same
+// hand-over (condition variable after the 5 ms deadline) that solves nothing: its lag is what
+// the machine gives any thread, measured just before the layout it is compared with.
 PoolTiming poolTiming(const ParametricModel& model, int pools, double seconds) {
-  const int total = 48, per = total / pools;
+  const bool bare = pools == 0;
+  if (bare) pools = 1;
+  const int total = bare ? 0 : 48, per = total / pools;
   std::vector<std::unique_ptr<IlqgPressureController>> ctl;
   for (int i = 0; i < total; ++i) ctl.push_back(std::make_unique<IlqgPressureController>(model, IlqgParams{}));
   std::mutex m;
@@ -442,12 +448,14 @@ PoolTiming poolTiming(const ParametricModel& model, int pools, double seconds) {
   // A single pool spreads its cylinders over all cores; several pools are one thread each
   // (as separate processes would be) and the OS spreads them.
   std::unique_ptr<adroit::ThreadPool> workers;
-  if (pools == 1) workers = std::make_unique<adroit::ThreadPool>(0);
+  if (pools == 1 && !bare) workers = std::make_unique<adroit::ThreadPool>(0);
   for (int p = 0; p < pools; ++p) {
     threads.emplace_back([&, p] {
       long seen = 0;
+      // Allocated once, as a pool's tick allocates nothing; under the lock only this pool's
+      // own pressures are copied, so the 48 wake-ups of a cycle hold it briefly.
+      std::vector<double> state(total), out(per);
       for (;;) {
-        std::vector<double> state;
         std::chrono::steady_clock::time_point received;
         double t;
         {
@@ -455,12 +463,11 @@ PoolTiming poolTiming(const ParametricModel& model, int pools, double seconds) {
           cv.wait(lock, [&] { return stop || cycle > seen; });
           if (stop) return;
           seen = cycle;
-          state = pressure;
+          std::copy(pressure.begin() + p * per, pressure.begin() + (p + 1) * per, state.begin() + p * per);
           received = stamp;
           t = cycle * kTick;
         }
         adroit::Stopwatch sw;
-        std::vector<double> out(per);
         auto solveOne = [&, p, t](std::size_t j) {
           const int i = p * per + static_cast<int>(j);
           double r[101];
@@ -732,19 +739,25 @@ int main(int argc, char** argv) {
   // 4. Pool timing.
   if (want("pool")) {
     std::printf("Pool timing on %u cores: iLQG N=100, %d iteration(s), every cylinder re-solved each 5 ms cycle;\n"
-                "1x48 spreads its cylinders over an adroit::ThreadPool of all cores\n",
+                "1x48 spreads its cylinders over an adroit::ThreadPool of all cores. Before each layout, a bare\n"
+                "thread keeps the same schedule for as long without solving (the machine's own wake-up lag)\n",
                 std::thread::hardware_concurrency(), IlqgParams{}.iterations);
-    std::printf("  %-8s %-44s %-44s %7s\n", "pools", "solve per pool cycle (ms)", "policy lag state->command (ms)",
-                "missed");
+    std::printf("  %-8s %-40s %-40s %7s %-40s\n", "pools", "solve per pool cycle (ms)", "policy lag state->command (ms)",
+                "missed", "bare thread's lag (ms)");
+    const double seconds = quick ? 1.0 : 3.0;
     for (int pools : {1, 6, 12, 48}) {
-      const PoolTiming t = poolTiming(model, pools, quick ? 1.0 : 3.0);
-      std::printf("  %2dx%-5d %-44s %-44s %7d\n", pools, 48 / pools, adroit::formatSummary(t.solve.summary(), 1e3, "").c_str(),
-                  adroit::formatSummary(t.lag.summary(), 1e3, "").c_str(), t.missed);
+      const PoolTiming reference = poolTiming(model, 0, seconds);
+      const PoolTiming t = poolTiming(model, pools, seconds);
+      std::printf("  %2dx%-5d %-40s %-40s %7d %-40s\n", pools, 48 / pools,
+                  adroit::formatSummary(t.solve.summary(), 1e3, "").c_str(),
+                  adroit::formatSummary(t.lag.summary(), 1e3, "").c_str(), t.missed,
+                  adroit::formatSummary(reference.lag.summary(), 1e3, "").c_str());
+      if (pools < 12) continue;  // required for the layouts of separate processes (issue 12, item 7)
       const std::string cfg = std::to_string(pools) + "x" + std::to_string(48 / pools);
-      result("pool_policy_lag_p99_" + cfg, t.lag.summary().p99 * 1e3, "ms", "<=", 2.0);
+      result("pool_policy_lag_p99_" + cfg, t.lag.summary().p99 * 1e3, "ms", "<=", reference.lag.summary().p99 * 1e3 + 1.0);
       result("pool_missed_resolves_" + cfg, t.missed, "cycles", "<=", 0);
     }
-    std::printf("\n");
+    std::printf("  (the lag targets are the bare thread's p99 + 1 ms)\n\n");
   }
   std::printf("Summary\n");
   for (const std::string& line : g_results) std::printf("%s\n", line.c_str());

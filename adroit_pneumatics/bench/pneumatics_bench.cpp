@@ -8,7 +8,9 @@
 //      with the model identified on the locked one (thesis 5.6.2), figs. 5.15-5.17
 //   4. pool timing: 1x48, 6x8, 12x4, 48x1 pools re-solving every 5 ms (fig. 5.20), each next
 //      to a bare thread keeping the same schedule just before it
-// Usage: pneumatics_bench [--quick] [--only plant|id|types|track|pool] [--limit V]
+// Usage: pneumatics_bench [--quick] [--only plant|id|types|track|pool] [--limit V] [--out DIR]
+//   --out: directory for the CSV files and the PNG plots drawn from them by plot_pneumatics.py
+//          (installed next to this program); default pneumatics_bench_out
 //   --only types: eq. 5.5 identified per cylinder type (M9, M16, M24, M40); not in the default run
 //   --limit: command limit of both controllers in the tracking tables (default 2 V, 5.6.3)
 #include <algorithm>
@@ -17,11 +19,15 @@
 #include <cmath>
 #include <condition_variable>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
 #include <limits>
 #include <memory>
 #include <mutex>
 #include <random>
+#include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
@@ -46,6 +52,17 @@ constexpr double kPi = 3.14159265358979323846;
 
 std::vector<std::string> g_results;
 double g_limit = 2.0;
+std::string g_out_dir = "pneumatics_bench_out";  // CSV files and plots
+
+// A CSV file in the output directory (created on first use); throws if it cannot be written.
+std::ofstream openCsv(const std::string& name) {
+  std::filesystem::create_directories(g_out_dir);
+  const std::string path = g_out_dir + "/" + name;
+  std::ofstream f(path);
+  if (!f) throw std::runtime_error("cannot write " + path);
+  f.precision(9);
+  return f;
+}
 
 void result(const std::string& name, double value, const char* unit, const char* op, double target) {
   bool pass = false;
@@ -569,6 +586,7 @@ int main(int argc, char** argv) {
     if (a == "--quick") quick = true;
     else if (a == "--only" && i + 1 < argc) only = argv[++i];
     else if (a == "--limit" && i + 1 < argc) g_limit = std::atof(argv[++i]);
+    else if (a == "--out" && i + 1 < argc) g_out_dir = argv[++i];
   }
   const auto want = [&](const char* s) { return only.empty() || only == s; };
   const auto want_only = [&](const char* s) { return only == s; };  // sections not in the default run
@@ -758,6 +776,14 @@ int main(int argc, char** argv) {
       result("pool_missed_resolves_" + cfg, t.missed, "cycles", "<=", 0);
     }
     std::printf("  (the lag targets are the bare thread's p99 + 1 ms)\n\n");
+  }
+  // plot_pneumatics.py is installed next to this program; it plots whichever CSV files this
+  // run wrote.
+  const std::string script = std::filesystem::read_symlink("/proc/self/exe").parent_path() / "plot_pneumatics.py";
+  const std::string plot = "python3 \"" + script + "\" \"" + g_out_dir + "\"";
+  if (std::filesystem::exists(g_out_dir)) {
+    if (std::system(plot.c_str()) != 0) std::printf("(plotting failed: %s)\n\n", plot.c_str());
+    else std::printf("plots: %s/*.png\n\n", g_out_dir.c_str());
   }
   std::printf("Summary\n");
   for (const std::string& line : g_results) std::printf("%s\n", line.c_str());

@@ -1,0 +1,62 @@
+#!/usr/bin/python3
+"""Plots of pneumatics_bench from the CSV files it wrote into DIR.
+
+    plot_pneumatics.py DIR
+
+  tracking_<case>.csv  -> tracking_<case>.png: reference, iLQG, PIDF (and the floor where the
+                          file has one) over time, valve commands below (thesis figs. 5.15-5.17)
+"""
+import csv
+import glob
+import os
+import sys
+
+import matplotlib
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+
+def read_columns(path):
+    with open(path) as f:
+        rows = list(csv.DictReader(f))
+    if not rows:
+        return {}
+    return {key: [float(r[key]) for r in rows] for key in rows[0]}
+
+
+def plot_tracking(path):
+    """Columns: t, reference, ilqg, pidf [, floor], ilqg_u, pidf_u (s, Pa, V)."""
+    c = read_columns(path)
+    if not c:
+        return
+    case = os.path.basename(path)[len("tracking_"):-len(".csv")]
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(10, 6), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
+    kpa = lambda key: [v / 1e3 for v in c[key]]  # noqa: E731
+    top.plot(c["t"], kpa("reference"), color="black", linewidth=1.0, label="reference")
+    if "floor" in c:
+        top.plot(c["t"], kpa("floor"), color="tab:green", linewidth=0.8, linestyle="--",
+                 label="floor (valve at the limit at each jump, oracle stop)")
+    top.plot(c["t"], kpa("pidf"), color="tab:orange", linewidth=0.9, label="PIDF")
+    top.plot(c["t"], kpa("ilqg"), color="tab:blue", linewidth=0.9, label="iLQG")
+    top.set_ylabel("pressure [kPa]")
+    top.set_title("pressure tracking: " + case.replace("_", " "))
+    top.legend(loc="upper right", fontsize=8)
+    bottom.plot(c["t"], c["pidf_u"], color="tab:orange", linewidth=0.8, label="PIDF")
+    bottom.plot(c["t"], c["ilqg_u"], color="tab:blue", linewidth=0.8, label="iLQG")
+    bottom.set_ylabel("valve command [V]")
+    bottom.set_xlabel("time [s]")
+    bottom.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path[:-len(".csv")] + ".png", dpi=90)
+    plt.close(fig)
+
+
+def main(out_dir):
+    for path in sorted(glob.glob(os.path.join(out_dir, "tracking_*.csv"))):
+        plot_tracking(path)
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 2:
+        sys.exit(__doc__)
+    main(sys.argv[1])

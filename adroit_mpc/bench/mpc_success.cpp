@@ -64,6 +64,7 @@
 #include <adroit_pneumatics/params_io.h>
 #include <adroit_pneumatics/plant.h>
 #include <adroit_pneumatics/pool.h>
+#include <adroit_pneumatics/tracking_floor.h>
 #include <adroit_mpc/planner.h>
 #include <adroit_mpc/planning_model.h>
 #include <adroit_mpc/synergies.h>
@@ -233,7 +234,13 @@ class TrialRunner {
         pool_cylinders_.push_back(
             {c.name, c.bore_area, pneumatics::deadVolume(c.type, c.bore_diameter), models.forCylinder(c.name)});
       pool_options_.controller = "ilqg";
-      pool_options_.ilqg.iterations = 2;  // config/pools.yaml
+      for (const auto& c : robot_->cylinders()) {
+        pneumatics::CylinderSpec spec = pneumatics::cylinderSpec(c.type);
+        spec.dead_volume = pneumatics::deadVolume(c.type, c.bore_diameter);
+        const std::string group = c.name.rfind("A_WR", 0) == 0 ? "wrist" : c.name.rfind("A_AR", 0) == 0 ? "arm"
+                                                                                                      : c.name.substr(2, 2);
+        audited_.push_back({group, spec});
+      }
     }
   }
 
@@ -244,8 +251,14 @@ class TrialRunner {
     if (has_object && !robot_->setObjectPose({spec.object_start.x(), spec.object_start.y(), spec.object_start.z()},
                                              {1, 0, 0, 0}, {0, 0, 0}, {0, 0, 0}, &why))
       throw std::runtime_error("object pose: " + why);
-    if (variant_.pneumatic)
+    if (variant_.pneumatic) {
       pool_ = std::make_unique<pneumatics::CylinderPool>(pool_cylinders_, robot_->cylinderNames(), pool_options_);
+      if (!force_audit_)  // the pools' command limit is known by now (setPoolParams)
+        force_audit_ = std::make_unique<pneumatics::ForceTrackingAudit>(audited_, pool_options_.ilqg.u_max,
+                                                                         pneumatics::PlantOptions{}.tube_delay);
+      force_audit_->start(robot_->sensed().pressure);
+      last_floor_time_ = robot_->clock();
+    }
     next_tick_ = robot_->clock();
     TaskParams params;
     for (const auto& [key, value] : param_overrides_) params.numbers[key] = value;
@@ -257,6 +270,7 @@ class TrialRunner {
     planner->initialize(plan_model_.get(), *task, settings_);
 
     TrialResult r;
+    force_trace_.clear();
     r.lowest_z = 1e9;
     std::vector<double> plan_seconds;
     PlanPolicy active, fresh;
@@ -356,7 +370,9 @@ class TrialRunner {
     const auto verdict = pool_->setReference(robot_->clock(), ref.t0, ref.dt, ref.steps, robot_->cylinderNames(),
                                              ref.force);
     if (!verdict.ok()) throw std::runtime_error("pool rejected the plan's reference: " + verdict.detail);
+    sent_ = ref;
   }
+  Reference sent_;  // the last reference sent (open-loop variant)
 
   void observeState(Task& task, const PlannerState& s) {
     const mjModel* pm = plan_model_.get();
@@ -395,6 +411,14 @@ class TrialRunner {
         const auto verdict = pool_->setReference(now, now, policy.policy.dt, samples, robot_->cylinderNames(),
                                                  positive(reference_, samples * m->nu));
         if (!verdict.ok()) throw std::runtime_error("pool rejected the policy's reference: " + verdict.detail);
+        recordForceTracking(sensed);
+      } else if (have_policy && sent_.steps > 0) {  // the last plan's tensions, interpolated at now
+        const std::size_t nu = all_actuators_.size();
+        const double x = std::clamp((now - sent_.t0) / sent_.dt, 0.0, static_cast<double>(sent_.steps - 1));
+        const auto k0 = static_cast<std::size_t>(x), k1 = std::min(k0 + 1, sent_.steps - 1);
+        for (std::size_t j = 0; j < nu; ++j)
+          reference_[j] = sent_.force[k0 * nu + j] + (x - k0) * (sent_.force[k1 * nu + j] - sent_.force[k0 * nu + j]);
+        recordForceTracking(sensed);
       }
       const auto verdict = pool_->setState(now, now, robot_->cylinderNames(), sensed.pressure, sensed.length,
                                            sensed.length_rate, sensed.supply_pressure);
@@ -435,6 +459,20 @@ class TrialRunner {
   void resetTrace() { next_trace_ = 0; }
   // The trial's states as render_states reads them: time, one column per hinge / slide joint,
   // <free joint>:x|y|z|qw|qx|qy|qz.
+  // Pneumatic variants: the last trial's planned and sensed tension per cylinder at the pools'
+  // ticks (columns time, <cylinder>:plan..., <cylinder>:sensed...).
+  void writeForces(const std::string& path) const {
+    if (force_trace_.empty()) return;
+    std::ofstream out(path);
+    out << "time";
+    for (const char* kind : {"plan", "sensed"})
+      for (const std::string& name : robot_->cylinderNames()) out << "," << name << ":" << kind;
+    out << "\n";
+    for (const auto& row : force_trace_) {
+      for (std::size_t k = 0; k < row.size(); ++k) out << (k ? "," : "") << row[k];
+      out << "\n";
+    }
+  }
   void writeStates(const std::string& path, const TrialResult& r) const {
     const mjModel* m = robot_->model();
     std::ofstream out(path);
@@ -464,6 +502,10 @@ class TrialRunner {
   void setPrintEvents(bool on) { print_events_ = on; }
   // Task parameters (numbers: weights, thresholds) over the task's defaults.
   void setParams(const std::map<std::string, double>& numbers) { param_overrides_ = numbers; }
+  void setPoolParams(const pneumatics::IlqgParams& p) {
+    p.validate();
+    pool_options_.ilqg = p;
+  }
   // The planner and the policy see the driver's sensed signals (noise, quantisation, delays)
   // instead of the true state, as the node does.
   void setSensed(bool sensed) { sensed_ = sensed; }
@@ -501,13 +543,41 @@ class TrialRunner {
     for (std::size_t i = 0; i < n; ++i) force_[i] = std::max(0.0, values[i]);
     return force_;
   }
+  // Sensed tension against the plan's tension now (the reference's first sample), per group
+  // of cylinders, as the demo reports it, next to the floors of ForceTrackingAudit.
+  void recordForceTracking(const adroit::driver::Signals& sensed) {
+    const std::vector<double>& tension = sensed.tension;
+    const double now = robot_->clock();
+    volume_.resize(tension.size());
+    volume_rate_.resize(tension.size());
+    for (std::size_t j = 0; j < tension.size(); ++j) {
+      volume_[j] = pool_cylinders_[j].dead_volume + pool_cylinders_[j].bore_area * std::max(0.0, sensed.length[j]);
+      volume_rate_[j] = pool_cylinders_[j].bore_area * sensed.length_rate[j];
+    }
+    force_audit_->add(now - last_floor_time_, reference_, tension, volume_, volume_rate_, sensed.supply_pressure);
+    last_floor_time_ = now;
+    std::vector<double> row = {now};
+    row.insert(row.end(), reference_.begin(), reference_.begin() + tension.size());
+    row.insert(row.end(), tension.begin(), tension.end());
+    force_trace_.push_back(std::move(row));
+  }
+  std::vector<std::vector<double>> force_trace_;  // this trial: time, planned tensions, sensed tensions
   std::vector<double> reference_, force_;
   std::vector<double> pool_seconds_;  // wall time of each pool tick (all cylinders)
+  std::vector<pneumatics::ForceTrackingAudit::Cylinder> audited_;  // pneumatic variants
+  std::unique_ptr<pneumatics::ForceTrackingAudit> force_audit_;
+  std::vector<double> volume_, volume_rate_;
+  double last_floor_time_ = 0;
 
  public:
   // Median wall time of a pool tick so far [s] (0 in force mode): the CPU the pools need.
   std::size_t cylinders() const { return robot_->cylinderNames().size(); }
   double poolTickMedian() const { return pool_seconds_.empty() ? 0 : adroit::percentile(pool_seconds_, 50); }
+  static double poolPeriod() { return kPoolPeriod; }
+  // Pneumatic variants: force tracking per group over every trial so far.
+  std::map<std::string, pneumatics::ForceTrackingAudit::Group> forceTracking() const {
+    return force_audit_ ? force_audit_->groups() : std::map<std::string, pneumatics::ForceTrackingAudit::Group>{};
+  }
 
  private:
   std::string task_name_;
@@ -547,6 +617,8 @@ int main(int argc, char** argv) {
   double contact_margin = -1, contact_softness = -1;  // --contact M,S
   bool print_events = false;
   std::map<std::string, double> params;  // --set key=value
+  pneumatics::IlqgParams pool_ilqg;      // --pool key=value; the pools' settings as config/pools.yaml has them
+  pool_ilqg.iterations = 2;
   std::vector<std::string> sweep;  // fixed latencies [s] for iLQG on every task
   PlannerSettings overrides;       // horizon, dt <= 0: the task's hints
   overrides.horizon = overrides.dt = -1;
@@ -573,12 +645,19 @@ int main(int argc, char** argv) {
       const std::string kv = argv[++i];
       params[kv.substr(0, kv.find('='))] = std::atof(kv.c_str() + kv.find('=') + 1);
     }
+    else if (a == "--pool" && i + 1 < argc && std::strchr(argv[i + 1], '=')) {
+      const std::string kv = argv[++i];
+      if (!pneumatics::setIlqgParam(pool_ilqg, kv.substr(0, kv.find('=')), std::atof(kv.c_str() + kv.find('=') + 1))) {
+        std::fprintf(stderr, "--pool: unknown iLQG parameter in '%s'\n", kv.c_str());
+        return 2;
+      }
+    }
     else {
       std::fprintf(stderr,
                    "usage: mpc_success [--trials N] [--tasks catch,relocate,type] "
                    "[--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned] [--out DIR] [--seed S] "
                    "[--fixed-latency S] [--latency-sweep S,S,...] [--dt S] [--horizon S] [--skip K] [--sensed] "
-                   "[--contact M,S] [--events] [--set key=number]...\n");
+                   "[--contact M,S] [--events] [--set key=number]... [--pool ilqg_key=number]...\n");
       return 2;
     }
   }
@@ -643,6 +722,7 @@ int main(int argc, char** argv) {
       runner.setSensed(sensed);
       runner.setPrintEvents(print_events);
       runner.setParams(params);
+      runner.setPoolParams(pool_ilqg);
       int ok = 0, diverged = 0, keys_ok = 0, keys_all = 0;
       double error_sum = 0, typing_time = 0;
       std::vector<double> plan_ms;
@@ -670,6 +750,7 @@ int main(int argc, char** argv) {
         if (spec.index == 0) {
           for (const auto& [t, e] : r.trace) traces_csv << task << "," << variant.name << "," << t << "," << e << "\n";
           runner.writeStates(out_dir + "/states_" + task + "_" + variant.name + ".csv", r);
+          runner.writeForces(out_dir + "/forces_" + task + "_" + variant.name + ".csv");
         }
         std::fflush(stdout);
       }
@@ -682,9 +763,20 @@ int main(int argc, char** argv) {
                   error_sum / specs.size(),
                   task == "type" ? std::to_string(static_cast<int>(std::lround(speed[task][variant.name]))).c_str() : "-",
                   adroit::percentile(plan_ms, 50), diverged);
-      if (variant.pneumatic)
+      if (variant.pneumatic) {
         std::printf("%-9s %-14s pools: %.2f ms per 5 ms tick for %zu cylinders (median, one core)\n", "", "",
                     1e3 * runner.poolTickMedian(), runner.cylinders());
+        std::printf("%-9s %-14s force tracking, sensed vs planned tension, RMSE N (the demo's figure), against\n"
+                    "%-9s %-14s the floor: a cylinder racing at the command limit to each new reference after the\n"
+                    "%-9s %-14s plant's %.0f ms tube delay, stopping on it exactly, and per tick: one command per %.0f ms\n"
+                    "%-9s %-14s pool tick, chosen with an exact model\n",
+                    "", "", "", "", "", "", 1e3 * pneumatics::PlantOptions{}.tube_delay, 1e3 * TrialRunner::poolPeriod(),
+                    "", "");
+        std::printf("%-9s %-14s   %-6s %6s %6s %8s %8s\n", "", "", "group", "RMSE", "floor", "per tick", "max ref");
+        for (const auto& [group, f] : runner.forceTracking())
+          std::printf("%-9s %-14s   %-6s %6.2f %6.2f %8.2f %8.1f\n", "", "", group.c_str(), f.rmse, f.floor, f.per_tick,
+                      f.max_reference);
+      }
       std::fflush(stdout);
     }
   }

@@ -1,0 +1,91 @@
+// The tracking error no pressure controller can avoid: the best any controller within a
+// command limit can do when it learns of the reference only as it happens, and an audit
+// of a set of cylinders' force tracking against it.
+#pragma once
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include "adroit_pneumatics/plant.h"
+
+namespace adroit::pneumatics {
+
+// Follows a reference as closely as one chamber can: each step it moves towards the
+// reference as far as the valve held at the command limit takes it and stops exactly on it
+// (no sensing, tick or solver delay, no overshoot). The reference acts dead_time after it
+// is given (the plant's own tube delay belongs to the floor). A real controller has all of
+// those delays, so its error against the same reference is at least this follower's,
+// unless it anticipates the reference (preview). Uses the plant's chamber step with the
+// spec's valve and leak.
+class TrackingFloor {
+ public:
+  // limit: the controller's command limit, V (> 0); dead_time in [0, 0.1] s.
+  TrackingFloor(const CylinderSpec& spec, double limit, double dead_time = 0.0,
+                double room = constants::kAtmosphere);
+  // A controller that holds each command for a whole step (a pool's tick) instead of
+  // stopping exactly: each step it picks the command within the limit that ends its window
+  // (dead_time after the step's start, one step long; the dead time at most one step) on
+  // the reference, or the limit. Its model of the chamber is exact.
+  void setHoldCommandPerStep(bool hold) { hold_ = hold; }
+  void reset(double pressure);
+  // Advances dt with the reference p_ref (Pa) given now, the chamber volume (m^3), its rate
+  // (m^3/s) and the supply pressure; returns the pressure at the end of the step.
+  // Non-finite inputs leave it where it is. References older than 255 steps are forgotten
+  // (dead time / step <= 255).
+  double step(double p_ref, double dt, double volume, double volume_rate, double supply);
+  double pressure() const { return pressure_; }
+
+ private:
+  // End pressure after h from p with the command u held.
+  double advance(double p, double h, double u) const;
+  double holdStep(double p_ref, double dt);
+
+  CylinderSpec spec_;
+  double limit_, dead_time_, time_ = 0;
+  bool hold_ = false;
+  double held_ = 0.0;                    // V, the command acting (hold mode)
+  ChamberInputs fill_, vent_;            // geometry and supply of this step; ports at +limit, -limit
+  std::vector<double> history_time_, history_ref_;  // ring buffer of the recent references
+  std::size_t head_ = 0, count_ = 0;
+  double pressure_;
+};
+
+// Force tracking of cylinders against their references, per group (e.g. per finger), next
+// to two floors: TrackingFloor stopping exactly, and holding one command per sample (the
+// ideal controller at the sampling rate, e.g. a pool's 200 Hz tick).
+class ForceTrackingAudit {
+ public:
+  struct Cylinder {
+    std::string group;
+    CylinderSpec spec;  // with the cylinder's own dead volume and bore
+  };
+  struct Group {
+    double rmse = 0, floor = 0, per_tick = 0;  // N
+    double max_reference = 0;                  // N
+    long samples = 0;
+  };
+  // limit: the controller's command limit (V); dead_time: the plant's (s).
+  ForceTrackingAudit(std::vector<Cylinder> cylinders, double limit, double dead_time,
+                     double room = constants::kAtmosphere);
+  std::size_t size() const { return cylinders_.size(); }
+  // Starts the floors at these pressures (Pa) for a new run; the sums go on.
+  void start(const std::vector<double>& pressure);
+  // One sample dt after the previous one: per cylinder the reference and measured tension
+  // (N), the chamber volume (m^3) and its rate; the supply pressure (Pa).
+  void add(double dt, const std::vector<double>& reference, const std::vector<double>& tension,
+           const std::vector<double>& volume, const std::vector<double>& volume_rate, double supply);
+  std::map<std::string, Group> groups() const;
+
+ private:
+  struct Sums {
+    double error = 0, floor = 0, per_tick = 0, max_reference = 0;
+    long samples = 0;
+  };
+  std::vector<Cylinder> cylinders_;
+  double room_;
+  std::vector<TrackingFloor> floors_, ticks_;
+  std::map<std::string, Sums> sums_;
+};
+
+}  // namespace adroit::pneumatics

@@ -1,0 +1,152 @@
+#include "adroit_pneumatics/tracking_floor.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace adroit::pneumatics {
+
+namespace {
+constexpr std::size_t kHistory = 256;  // references kept for the dead time
+}  // namespace
+
+TrackingFloor::TrackingFloor(const CylinderSpec& spec, double limit, double dead_time, double room)
+    : spec_(spec), limit_(limit), dead_time_(dead_time), history_time_(kHistory), history_ref_(kHistory),
+      pressure_(room) {
+  if (!(limit > 0 && limit <= 5)) throw std::invalid_argument("TrackingFloor: limit must be in (0, 5] V");
+  if (!(dead_time >= 0 && dead_time <= 0.1)) throw std::invalid_argument("TrackingFloor: dead_time must be in [0, 0.1] s");
+  fill_.inlet_area = spec.valve.inlet(limit);
+  fill_.outlet_area = spec.valve.exhaust(limit) + spec.leak_area;
+  vent_.inlet_area = spec.valve.inlet(-limit);
+  vent_.outlet_area = spec.valve.exhaust(-limit) + spec.leak_area;
+  fill_.room = vent_.room = room;
+}
+
+void TrackingFloor::reset(double pressure) {
+  pressure_ = pressure;
+  held_ = 0.0;
+  time_ = 0;
+  count_ = 0;
+}
+
+double TrackingFloor::step(double p_ref, double dt, double volume, double volume_rate, double supply) {
+  if (!std::isfinite(p_ref) || !std::isfinite(volume) || !std::isfinite(volume_rate) || !std::isfinite(supply) ||
+      !(dt > 0) || !(volume > 0))
+    return pressure_;
+  for (ChamberInputs* in : {&fill_, &vent_}) {
+    in->volume = volume;
+    in->volume_rate = volume_rate;
+    in->supply = supply;
+  }
+  if (hold_) return holdStep(p_ref, dt);
+  head_ = (head_ + 1) % kHistory;
+  history_time_[head_] = time_, history_ref_[head_] = p_ref;
+  count_ = std::min(count_ + 1, kHistory);
+  // The references act dead_time after they were given (the oldest kept one until then):
+  // advance piecewise between the instants at which the acting reference changes.
+  const double end = time_ + dt;
+  double t = time_;
+  while (t < end - 1e-12) {
+    std::size_t acting = count_ - 1;  // age of the acting entry (0 = newest)
+    for (std::size_t k = 0; k < count_; ++k)
+      if (history_time_[(head_ + kHistory - k) % kHistory] + dead_time_ <= t + 1e-12) {
+        acting = k;
+        break;
+      }
+    const double change = acting == 0 ? end : history_time_[(head_ + kHistory - acting + 1) % kHistory] + dead_time_;
+    const double until = std::min(end, std::max(change, t + 1e-9));
+    // The reachable interval after the sub-step is [vented, filled]: both are monotone in
+    // the start pressure, and any command within the limit ends between them.
+    const double h = until - t;
+    const double filled = chamberStep(pressure_, h, fill_), vented = chamberStep(pressure_, h, vent_);
+    pressure_ = std::clamp(history_ref_[(head_ + kHistory - acting) % kHistory], std::min(vented, filled),
+                           std::max(vented, filled));
+    t = until;
+  }
+  time_ = end;
+  return pressure_;
+}
+
+double TrackingFloor::advance(double p, double h, double u) const {
+  if (!(h > 0)) return p;
+  ChamberInputs in = fill_;
+  in.inlet_area = spec_.valve.inlet(u);
+  in.outlet_area = spec_.valve.exhaust(u) + spec_.leak_area;
+  return chamberStep(p, h, in);
+}
+
+double TrackingFloor::holdStep(double p_ref, double dt) {
+  // The command chosen now acts from dead_time on (the previous one until then) for one
+  // step: the one whose pressure at the end of that window is the reference. The end
+  // pressure rises monotonically with the command, so bisection finds it.
+  const double lag = std::min(dead_time_, dt);
+  const double start = advance(pressure_, lag, held_);
+  double u;
+  if (p_ref >= advance(start, dt, limit_)) {
+    u = limit_;
+  } else if (p_ref <= advance(start, dt, -limit_)) {
+    u = -limit_;
+  } else {
+    double lo = -limit_, hi = limit_;
+    for (int k = 0; k < 24; ++k) {  // 10 V / 2^24: far below any valve's resolution
+      const double mid = 0.5 * (lo + hi);
+      (advance(start, dt, mid) < p_ref ? lo : hi) = mid;
+    }
+    u = 0.5 * (lo + hi);
+  }
+  pressure_ = advance(start, dt - lag, u);
+  held_ = u;
+  time_ += dt;
+  return pressure_;
+}
+
+ForceTrackingAudit::ForceTrackingAudit(std::vector<Cylinder> cylinders, double limit, double dead_time, double room)
+    : cylinders_(std::move(cylinders)), room_(room) {
+  for (const Cylinder& c : cylinders_) {
+    if (!(c.spec.bore_area > 0)) throw std::invalid_argument("ForceTrackingAudit: bore area of '" + c.group + "' <= 0");
+    floors_.emplace_back(c.spec, limit, dead_time, room);
+    ticks_.emplace_back(c.spec, limit, dead_time, room);
+    ticks_.back().setHoldCommandPerStep(true);
+  }
+}
+
+void ForceTrackingAudit::start(const std::vector<double>& pressure) {
+  for (std::size_t j = 0; j < cylinders_.size(); ++j) {
+    const double p = j < pressure.size() && std::isfinite(pressure[j]) ? pressure[j] : room_;
+    floors_[j].reset(p);
+    ticks_[j].reset(p);
+  }
+}
+
+void ForceTrackingAudit::add(double dt, const std::vector<double>& reference, const std::vector<double>& tension,
+                             const std::vector<double>& volume, const std::vector<double>& volume_rate,
+                             double supply) {
+  const std::size_t n = std::min({cylinders_.size(), reference.size(), tension.size(), volume.size(),
+                                  volume_rate.size()});
+  for (std::size_t j = 0; j < n; ++j) {
+    if (!std::isfinite(reference[j]) || !std::isfinite(tension[j])) continue;
+    const double area = cylinders_[j].spec.bore_area, want = std::max(0.0, reference[j]);
+    const double p_ref = room_ + want / area;
+    // Tension is pull only: a chamber below the room pressure pulls nothing.
+    const auto pull = [&](double p) { return std::max(0.0, (p - room_) * area); };
+    const double floor = pull(floors_[j].step(p_ref, dt, volume[j], volume_rate[j], supply));
+    const double tick = pull(ticks_[j].step(p_ref, dt, volume[j], volume_rate[j], supply));
+    Sums& s = sums_[cylinders_[j].group];
+    s.error += (tension[j] - want) * (tension[j] - want);
+    s.floor += (floor - want) * (floor - want);
+    s.per_tick += (tick - want) * (tick - want);
+    s.max_reference = std::max(s.max_reference, want);
+    ++s.samples;
+  }
+}
+
+std::map<std::string, ForceTrackingAudit::Group> ForceTrackingAudit::groups() const {
+  std::map<std::string, Group> out;
+  for (const auto& [name, s] : sums_) {
+    const double n = static_cast<double>(std::max(1L, s.samples));
+    out[name] = {std::sqrt(s.error / n), std::sqrt(s.floor / n), std::sqrt(s.per_tick / n), s.max_reference, s.samples};
+  }
+  return out;
+}
+
+}  // namespace adroit::pneumatics

@@ -1,0 +1,115 @@
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "adroit_pneumatics/plant.h"
+#include "adroit_pneumatics/tracking_floor.h"
+
+using namespace adroit::pneumatics;
+
+namespace {
+constexpr double kDt = 0.005, kLimit = 2.0;
+
+PlantOptions exactPlant() {
+  PlantOptions o;
+  o.tube_delay = 0;
+  o.area_spread = o.offset_spread = 0;
+  return o;
+}
+SupplyParams stiffSupply() {
+  SupplyParams s;
+  s.sag_per_mass_flow = 0;  // the floor is given the supply; keep it constant
+  return s;
+}
+double stepRef(int k) { return k < 20 ? 150e3 : k < 40 ? 500e3 : k < 60 ? 250e3 : 450e3; }  // Pa, 100 ms levels
+}  // namespace
+
+// No controller within the limit that learns of each level as it comes does better: every
+// constant command in [-2, 2] V and proportional controllers of several gains, run on the
+// plant itself from the same start, end with at least the floor's squared error.
+TEST(TrackingFloor, NoControllerWithinTheLimitDoesBetter) {
+  const CylinderSpec spec = cylinderSpec("M9");
+  const double travel = 0.5 * spec.stroke, volume = spec.dead_volume + spec.bore_area * travel, rate = 0;
+  TrackingFloor floor(spec, kLimit);
+  floor.reset(constants::kAtmosphere);
+  double floor_sq = 0;
+  for (int k = 0; k < 80; ++k) floor_sq += std::pow(floor.step(stepRef(k), kDt, volume, 0.0, 620e3) - stepRef(k), 2);
+  const auto run = [&](double constant, double gain) {  // u = constant + gain (ref - p), clamped
+    PneumaticPlant plant({spec}, stiffSupply(), 1, exactPlant());
+    double sq = 0;
+    for (int k = 0; k < 80; ++k) {
+      const double u = std::clamp(constant + gain * (stepRef(k) - plant.pressure()[0]), -kLimit, kLimit);
+      plant.step(kDt, &u, &travel, &rate);
+      sq += std::pow(plant.pressure()[0] - stepRef(k), 2);
+    }
+    return sq;
+  };
+  double best = 1e300;
+  for (double u = -kLimit; u <= kLimit + 1e-9; u += 0.25) best = std::min(best, run(u, 0.0));
+  for (double gain : {1e-6, 3e-6, 1e-5, 3e-5, 1e-4}) best = std::min(best, run(0.0, gain));
+  EXPECT_LE(floor_sq, best);
+  EXPECT_GT(floor_sq, 0.2 * best);  // a bound, not zero: the jumps take time to fill
+}
+
+// Within reach it lands on the reference exactly; a reference given now acts only after the
+// dead time.
+TEST(TrackingFloor, StopsOnTheReferenceAfterTheDeadTime) {
+  const CylinderSpec spec = cylinderSpec("M9");
+  const double volume = spec.dead_volume + 0.5 * spec.bore_area * spec.stroke;
+  TrackingFloor now(spec, kLimit), late(spec, kLimit, 0.002);
+  now.reset(300e3), late.reset(300e3);
+  const double first = now.step(300e3, 0.001, volume, 0, 620e3);
+  EXPECT_DOUBLE_EQ(first, 300e3);
+  // A small change is within one 1 ms step's reach: on it at once without a dead time.
+  EXPECT_DOUBLE_EQ(now.step(305e3, 0.001, volume, 0, 620e3), 305e3);
+  late.step(300e3, 0.001, volume, 0, 620e3);
+  EXPECT_DOUBLE_EQ(late.step(305e3, 0.001, volume, 0, 620e3), 300e3);  // given at 1 ms, acts at 3 ms
+  EXPECT_DOUBLE_EQ(late.step(305e3, 0.001, volume, 0, 620e3), 300e3);
+  EXPECT_DOUBLE_EQ(late.step(305e3, 0.001, volume, 0, 620e3), 305e3);
+  // Non-finite input: unchanged.
+  EXPECT_DOUBLE_EQ(now.step(std::nan(""), 0.001, volume, 0, 620e3), 305e3);
+}
+
+// Holding one command per step, it ends the step on a reachable reference, and never beats
+// the floor that stops exactly.
+TEST(TrackingFloor, HoldingOneCommandPerStepEndsOnTheReference) {
+  const CylinderSpec spec = cylinderSpec("M9");
+  const double volume = spec.dead_volume + 0.5 * spec.bore_area * spec.stroke;
+  TrackingFloor hold(spec, kLimit), exact(spec, kLimit);
+  hold.setHoldCommandPerStep(true);
+  hold.reset(300e3), exact.reset(300e3);
+  EXPECT_NEAR(hold.step(320e3, kDt, volume, 0, 620e3), 320e3, 1.0);
+  double sq_hold = 0, sq_exact = 0;
+  for (int k = 0; k < 80; ++k) {
+    const double ref = stepRef(k);
+    sq_hold += std::pow(hold.step(ref, kDt, volume, 0, 620e3) - ref, 2);
+    sq_exact += std::pow(exact.step(ref, kDt, volume, 0, 620e3) - ref, 2);
+  }
+  EXPECT_GE(sq_hold, sq_exact);
+  EXPECT_LT(sq_hold, 4 * sq_exact);  // the same plant, the same reach
+}
+
+// Per group: a cylinder that tracks exactly has no error; the floors are the same for equal
+// cylinders and references.
+TEST(ForceTrackingAudit, SumsPerGroup) {
+  const CylinderSpec spec = cylinderSpec("M9");
+  ForceTrackingAudit audit({{"FF", spec}, {"FF", spec}, {"TH", spec}}, kLimit, 0.002);
+  audit.start({constants::kAtmosphere, constants::kAtmosphere, constants::kAtmosphere});
+  const double v = spec.dead_volume + 0.5 * spec.bore_area * spec.stroke;
+  for (int k = 0; k < 40; ++k) {
+    const double want = k < 10 ? 0.0 : 20.0;  // N
+    audit.add(kDt, {want, want, want}, {want, want, want + 1.0}, {v, v, v}, {0, 0, 0}, 620e3);
+  }
+  const auto groups = audit.groups();
+  ASSERT_EQ(groups.size(), 2u);
+  EXPECT_DOUBLE_EQ(groups.at("FF").rmse, 0.0);
+  EXPECT_NEAR(groups.at("TH").rmse, 1.0, 1e-12);
+  EXPECT_EQ(groups.at("FF").samples, 80);
+  EXPECT_GT(groups.at("FF").floor, 0.5);  // the 20 N jump takes time to fill
+  EXPECT_NEAR(groups.at("FF").floor, groups.at("TH").floor, 1e-9);
+  EXPECT_GE(groups.at("FF").per_tick, groups.at("FF").floor);
+  EXPECT_DOUBLE_EQ(groups.at("FF").max_reference, 20.0);
+  EXPECT_THROW(ForceTrackingAudit({{"FF", CylinderSpec{}}}, kLimit, 0.0), std::invalid_argument);
+}

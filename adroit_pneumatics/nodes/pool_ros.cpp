@@ -86,6 +86,7 @@ PoolOptions readOptions(const Params& p, const ros::NodeHandle& pnh) {
   o.pidf.kd = p.number("pidf/kd", o.pidf.kd);
   o.pidf.filter_hz = p.number("pidf/filter_hz", o.pidf.filter_hz);
   o.pidf.feedforward = p.boolean("pidf/feedforward", o.pidf.feedforward);
+  o.pidf.feedforward_advance = p.number("pidf/feedforward_advance", o.pidf.feedforward_advance);
   o.pidf.u_min = p.number("pidf/u_min", o.pidf.u_min);
   o.pidf.u_max = p.number("pidf/u_max", o.pidf.u_max);
   try {
@@ -112,7 +113,7 @@ class PoolRos {
                          "feedback_fraction", "solve_every", "disturbance_gain", "disturbance_limit",
                          "u_des_steady_state", "measurement_gain", "measurement_band", "jump_threshold",
                          "jump_iterations"});
-    p.checkKeys("pidf", {"kp", "ki", "kd", "filter_hz", "feedforward", "u_min", "u_max"});
+    p.checkKeys("pidf", {"kp", "ki", "kd", "filter_hz", "feedforward", "feedforward_advance", "u_min", "u_max"});
 
     // Cylinders: the model is the source of names and bores.
     const std::string model_file = p.modelPath("arm_hand");

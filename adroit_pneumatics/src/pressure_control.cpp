@@ -445,10 +445,33 @@ double IlqgPressureController::update(double t, double p_meas, double w_last, co
   return evaluate(t, p_est_, w_last);
 }
 
+bool setIlqgParam(IlqgParams& p, const std::string& name, double value) {
+  const auto integer = [&](int& field) { field = static_cast<int>(std::lround(value)); };
+  if (name == "horizon") integer(p.horizon);
+  else if (name == "dt") p.dt = value;
+  else if (name == "alpha_p") p.alpha_p = value;
+  else if (name == "alpha_u") p.alpha_u = value;
+  else if (name == "alpha_w") p.alpha_w = value;
+  else if (name == "u_min") p.u_min = value;
+  else if (name == "u_max") p.u_max = value;
+  else if (name == "iterations") integer(p.iterations);
+  else if (name == "feedback_fraction") p.feedback_fraction = value;
+  else if (name == "jump_threshold") p.jump_threshold = value;
+  else if (name == "jump_iterations") integer(p.jump_iterations);
+  else if (name == "disturbance_gain") p.disturbance_gain = value;
+  else if (name == "disturbance_limit") p.disturbance_limit = value;
+  else if (name == "measurement_gain") p.measurement_gain = value;
+  else if (name == "measurement_band") p.measurement_band = value;
+  else return false;
+  return true;
+}
+
 void PidfParams::validate() const {
   if (!(kp >= 0) || !(ki >= 0) || !(kd >= 0) || !std::isfinite(kp + ki + kd))
     throw std::invalid_argument("pidf: gains kp, ki, kd must be finite and >= 0");
   if (!(filter_hz > 0)) throw std::invalid_argument("pidf: filter_hz must be > 0");
+  if (!(feedforward_advance >= 0 && feedforward_advance <= 0.1))
+    throw std::invalid_argument("pidf: feedforward_advance must be in [0, 0.1] s");
   if (!(u_min < u_max) || u_min < -5 || u_max > 5) throw std::invalid_argument("pidf: need -5 <= u_min < u_max <= 5");
 }
 
@@ -463,7 +486,7 @@ void PidfController::reset() {
 }
 
 double PidfController::update(double t, double p_meas, double /*w_last*/, const ParametricInputs& in,
-                              const double* p_ref, int n_ref, double /*dt_ref*/, ControlStats* stats) {
+                              const double* p_ref, int n_ref, double dt_ref, ControlStats* stats) {
   if (stats) *stats = ControlStats{};
   if (n_ref < 1 || !std::isfinite(p_meas) || !std::isfinite(p_ref[0])) return kNaN;
   const double e = p_ref[0] - p_meas;  // Pa (the gains are per Pa)
@@ -473,7 +496,14 @@ double PidfController::update(double t, double p_meas, double /*w_last*/, const 
     const double blend = -std::expm1(-dt * 2.0 * M_PI * params_.filter_hz);
     derivative_ += blend * (raw - derivative_);
   }
-  const double ff = params_.feedforward ? model_.inverseSteadyState(p_ref[0], in, params_.u_min, params_.u_max) : 0.0;
+  double ff = 0.0;
+  if (params_.feedforward) {
+    double ahead = p_ref[0];
+    if (params_.feedforward_advance > 0 && n_ref > 1 && dt_ref > 0)
+      resampleReference(p_ref, n_ref, dt_ref, params_.feedforward_advance, dt_ref, 1, &ahead);
+    if (!std::isfinite(ahead)) return kNaN;
+    ff = model_.inverseSteadyState(ahead, in, params_.u_min, params_.u_max);
+  }
   const double unclamped = ff + params_.kp * e + params_.ki * integral_ + params_.kd * derivative_;
   // Integrate only while not pushing further into saturation (anti-windup).
   const bool saturated = (unclamped > params_.u_max && e > 0) || (unclamped < params_.u_min && e < 0);

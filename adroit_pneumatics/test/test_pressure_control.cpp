@@ -136,6 +136,30 @@ TEST(PidfController, IntegralRemovesSteadyError) {
   EXPECT_LT(err, 2e3);
 }
 
+// The feedforward takes the previewed reference feedforward_advance ahead (samples 5 ms
+// apart, the jump 10 ms ahead): the new level's steady-state command at 10 ms, the
+// interpolated reference's at 7.5 ms, the current level's without an advance.
+TEST(PidfController, FeedforwardTakesTheReferenceAheadByTheAdvance) {
+  PidfParams prm;
+  prm.kp = prm.ki = prm.kd = 0.0;  // feedforward only
+  const ParametricModel m = model();
+  ParametricInputs in;
+  in.volume = 1e-6;
+  const std::vector<double> ref = {200e3, 200e3, 400e3, 400e3};
+  const auto command = [&](double advance) {
+    prm.feedforward_advance = advance;
+    PidfController c(m, prm);
+    return c.update(0.0, 200e3, 0.0, in, ref.data(), 4, 0.005, nullptr);
+  };
+  const auto steady = [&](double p) { return m.inverseSteadyState(p, in, prm.u_min, prm.u_max); };
+  EXPECT_NEAR(command(0.0), steady(200e3), 1e-9);
+  EXPECT_NEAR(command(0.0075), steady(300e3), 1e-9);
+  EXPECT_NEAR(command(0.010), steady(400e3), 1e-9);
+  EXPECT_GT(steady(400e3), steady(200e3) + 0.1);  // the cases differ
+  prm.feedforward_advance = -0.001;
+  EXPECT_THROW(PidfController(m, prm), std::invalid_argument);
+}
+
 TEST(IlqgController, PolicyExpiresWithoutNewSolve) {
   IlqgPressureController c(model(), IlqgParams{}, 1000);
   ParametricInputs in;

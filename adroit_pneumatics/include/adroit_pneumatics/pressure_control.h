@@ -7,6 +7,7 @@
 #pragma once
 
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "adroit_pneumatics/parametric_model.h"
@@ -45,7 +46,7 @@ struct IlqgParams {
   // of the reference), the solver also tries the time-optimal guess "command limit until the
   // predicted pressure reaches the reference, then the command that holds it" and starts
   // from whichever of it and the warm start costs less. 0 disables.
-  double jump_threshold = 0.0;  // Pa; off by default (see config/pools.yaml)
+  double jump_threshold = 20e3;  // Pa; 0 disables
   int jump_iterations = 3;      // iterations of a solve that starts far from the reference
   // Offset-free MPC (IlqgPressureController): gain of the disturbance estimate, a constant
   // pressure-rate bias d (Pa/s) added to the model, updated each tick from the one-step
@@ -58,13 +59,19 @@ struct IlqgParams {
   double measurement_gain = 0.25;
   // Innovations larger than this (Pa) are model error, not sensor noise: the part of the
   // innovation beyond the band is taken in full. 0 = always measurement_gain.
-  double measurement_band = 0.0;  // off by default; 4000 = 2 sigma of the sensor noise
+  double measurement_band = 4000.0;  // 2 sigma of the sensor noise
   // u_des of eq. 5.12: false (default) = the previous plan shifted in time (alpha_u is then a
   // pure proximal regulariser that cannot bias the steady state), true = the model's
   // steady-state inverse of the reference (biased whenever the model is).
   bool u_des_steady_state = false;
   void validate() const;        // throws std::invalid_argument naming the field
 };
+
+// Sets one field of p by its name (horizon, dt, alpha_p, alpha_u, alpha_w, u_min, u_max,
+// iterations, feedback_fraction, jump_threshold, jump_iterations, disturbance_gain,
+// disturbance_limit, measurement_gain, measurement_band); false for an unknown name. For the
+// benchmarks' command-line overrides; call validate() afterwards.
+bool setIlqgParam(IlqgParams& p, const std::string& name, double value);
 
 // Time-varying affine policy u = u_i + fraction * K_i . ([p, w] - [p_i, w_i]).
 struct Policy {
@@ -165,12 +172,17 @@ struct PidfParams {
   double kd = 2e-8;          // V s/Pa
   double filter_hz = 30.0;   // derivative low-pass
   bool feedforward = true;   // add the model's steady-state command for the reference
+  // s: the feedforward takes the reference this far ahead (interpolated in the previewed
+  // reference; its last sample when the preview is shorter). The loop's dead time is the
+  // usual choice: the command then acts when the reference it was meant for is due.
+  double feedforward_advance = 0.0;
   double u_min = -2.0, u_max = 2.0;
   void validate() const;
 };
 
 // PID with filtered derivative, anti-windup by conditional integration and optional
-// model feedforward. Uses only the current reference sample (it is myopic by design).
+// model feedforward. The feedback uses only the current reference sample (it is myopic by
+// design); the feedforward may look feedforward_advance ahead.
 class PidfController : public PressureController {
  public:
   PidfController(const ParametricModel& model, const PidfParams& params);

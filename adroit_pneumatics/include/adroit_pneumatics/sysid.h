@@ -54,10 +54,15 @@ struct FitOptions {
   int long_segment = 100;      // final joint stage: longer open-loop segments (closer to the
                                // 2 s prediction criterion); <= segment skips it
   bool multi_start = true;     // several starting points for the steady state and the rate
+  // kSaturating: eq. 5.5 is fitted first (as above), mapped onto the saturating form
+  // (saturatingFromEq55) and the rate, volume, dead time and saturation (u_sat, e_fill,
+  // e_exhaust) refitted from there by the same stages.
+  ParametricForm form = ParametricForm::kEq55;
 };
 
 // (a) Steady state from a slow sweep: c2, c3, c4 (multi-start). (b) Rate from low-passed
-// random commands: c7, c8, c9, cg (+ c5, c6 if fit_volume, + td if fit_dead_time), by
+// random commands: c7, c8, c9, cg (+ c5, c6 or v0 if fit_volume, + td if fit_dead_time,
+// + u_sat, e_fill, e_exhaust for the saturating form), by
 // multi-step simulation error over segments of `segment` samples (multi-start), then all
 // parameters jointly, then all jointly on segments of `long_segment` samples.
 FitReport fitParametricModel(const Recording& sweep, const Recording& random, const FitOptions& options,

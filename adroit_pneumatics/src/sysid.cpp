@@ -333,6 +333,36 @@ FitReport fitParametricModel(const Recording& sweep, const Recording& random, co
   return rep;
 }
 
+double parameterConditionNumber(const Recording& rec, const ParametricParams& prm, int segment) {
+  rec.validate();
+  const bool saturating = prm.form == ParametricForm::kSaturating;
+  std::vector<std::pair<double ParametricParams::*, double>> columns = {
+      {&ParametricParams::c2, 0.1}, {&ParametricParams::c3, 0.0}, {&ParametricParams::c4, 1.0},
+      {&ParametricParams::c5, 0.0}, {&ParametricParams::c7, 0.0}, {&ParametricParams::c8, 0.1},
+      {&ParametricParams::c9, 0.0}, {&ParametricParams::cg, 0.0}, {&ParametricParams::td, 1e-3}};
+  if (saturating) {
+    for (auto m : {&ParametricParams::u_sat, &ParametricParams::e_fill, &ParametricParams::e_exhaust}) columns.emplace_back(m, 0.0);
+    columns.emplace_back(&ParametricParams::v0, 0.1);
+  } else {
+    columns.emplace_back(&ParametricParams::c6, 0.0);
+  }
+  // Forward differences: parameters at a bound (v0, c4) can only move inwards.
+  Eigen::VectorXd r0, r;
+  segmentResiduals(rec, prm, segment, r0);
+  Eigen::MatrixXd J(r0.size(), static_cast<Eigen::Index>(columns.size()));
+  for (std::size_t j = 0; j < columns.size(); ++j) {
+    const auto [member, floor] = columns[j];
+    ParametricParams moved = prm;
+    moved.*member += 1e-4 * std::max(std::abs(prm.*member), floor);
+    segmentResiduals(rec, moved, segment, r);
+    J.col(static_cast<Eigen::Index>(j)) = (r - r0) / 1e-4;  // per relative change of the parameter
+  }
+  // Singular values of J: the square roots of those of the small square J^T J (descending).
+  const Eigen::MatrixXd normal = J.transpose() * J;
+  const Eigen::VectorXd sv = Eigen::JacobiSVD<Eigen::MatrixXd, Eigen::NoQRPreconditioner>(normal).singularValues();
+  return std::sqrt(sv[0] / std::max(sv[sv.size() - 1], 1e-300));
+}
+
 PredictionReport predictionRmse(const Recording& rec, const ParametricModel& model, double window) {
   rec.validate();
   const auto len = static_cast<std::size_t>(std::lround(window / rec.dt));

@@ -71,6 +71,13 @@ FitReport fitParametricModel(const Recording& sweep, const Recording& random, co
 FitReport fitParametricModel(const Recording& sweep, const Recording& random, bool fit_volume,
                              int segment = 20, const ParametricParams& initial = {});
 
+// Conditioning of the fitted parameters: the condition number of the Jacobian of the
+// multi-step residuals (segments of `segment` samples) with respect to the parameters the fit
+// moves, each in units of its own size (of a floor for the few that sit at or near zero:
+// c2, c8 0.1, c4 1, td 1 ms, v0 0.1 cm^3). Scale-degenerate parameters (eq. 5.5's c5, c6,
+// c7, c9 with c6 v >> 1) give a huge number.
+double parameterConditionNumber(const Recording& rec, const ParametricParams& prm, int segment = 100);
+
 struct PredictionReport {
   double rmse = 0;          // Pa over all windows
   double percent = 0;       // of the working range (mean supply - room)

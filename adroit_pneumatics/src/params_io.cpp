@@ -15,33 +15,52 @@ struct Field {
   const char* name;
   double ParametricParams::*member;
 };
-const Field kFields[] = {{"c2", &ParametricParams::c2}, {"c3", &ParametricParams::c3}, {"c4", &ParametricParams::c4},
-                         {"c5", &ParametricParams::c5}, {"c6", &ParametricParams::c6}, {"c7", &ParametricParams::c7},
-                         {"c8", &ParametricParams::c8}, {"c9", &ParametricParams::c9}, {"cg", &ParametricParams::cg}};
+// Fields of each form, in the order they are written. Eq. 5.5 files written before the dead
+// time existed have no td: it stays optional there (0 when absent).
+const Field kEq55Fields[] = {{"c2", &ParametricParams::c2}, {"c3", &ParametricParams::c3}, {"c4", &ParametricParams::c4},
+                             {"c5", &ParametricParams::c5}, {"c6", &ParametricParams::c6}, {"c7", &ParametricParams::c7},
+                             {"c8", &ParametricParams::c8}, {"c9", &ParametricParams::c9}, {"cg", &ParametricParams::cg}};
+const Field kSaturatingFields[] = {
+    {"c2", &ParametricParams::c2}, {"c3", &ParametricParams::c3},       {"c4", &ParametricParams::c4},
+    {"c5", &ParametricParams::c5}, {"v0", &ParametricParams::v0},       {"c7", &ParametricParams::c7},
+    {"c8", &ParametricParams::c8}, {"c9", &ParametricParams::c9},       {"cg", &ParametricParams::cg},
+    {"u_sat", &ParametricParams::u_sat}, {"e_fill", &ParametricParams::e_fill},
+    {"e_exhaust", &ParametricParams::e_exhaust}, {"td", &ParametricParams::td}};
+constexpr const char* kEq55Name = "eq5.5";
+constexpr const char* kSaturatingName = "saturating";
+
+double readNumber(const YAML::Node& v, const std::string& where, const std::string& source) {
+  double x;
+  try {
+    x = v.as<double>();
+  } catch (const YAML::Exception&) {
+    throw std::runtime_error(source + ": " + where + ": expected a number");
+  }
+  if (!std::isfinite(x)) throw std::runtime_error(source + ": " + where + ": not finite");
+  return x;
+}
 
 ParametricParams parseParams(const YAML::Node& node, const std::string& where, const std::string& source) {
-  if (!node.IsMap()) throw std::runtime_error(source + ": " + where + ": expected a map of c2..c9, cg");
+  if (!node.IsMap()) throw std::runtime_error(source + ": " + where + ": expected a map of model parameters");
   ParametricParams p;
-  for (const Field& f : kFields) {
-    const YAML::Node v = node[f.name];
-    if (!v) throw std::runtime_error(source + ": " + where + "." + f.name + ": missing");
-    double x;
-    try {
-      x = v.as<double>();
-    } catch (const YAML::Exception&) {
-      throw std::runtime_error(source + ": " + where + "." + f.name + ": expected a number");
-    }
-    if (!std::isfinite(x)) throw std::runtime_error(source + ": " + where + "." + f.name + ": not finite");
-    p.*(f.member) = x;
+  if (const YAML::Node form = node["form"]) {
+    const std::string name = form.IsScalar() ? form.as<std::string>() : "";
+    if (name == kSaturatingName) p.form = ParametricForm::kSaturating;
+    else if (name != kEq55Name)
+      throw std::runtime_error(source + ": " + where + ".form: expected " + kEq55Name + " or " + kSaturatingName);
   }
-  // Optional (files written before the dead time existed have none): input dead time, s.
-  if (const YAML::Node v = node["td"]) {
-    try {
-      p.td = v.as<double>();
-    } catch (const YAML::Exception&) {
-      throw std::runtime_error(source + ": " + where + ".td: expected a number");
-    }
+  const bool saturating = p.form == ParametricForm::kSaturating;
+  const Field* begin = saturating ? std::begin(kSaturatingFields) : std::begin(kEq55Fields);
+  const Field* end = saturating ? std::end(kSaturatingFields) : std::end(kEq55Fields);
+  for (const Field* f = begin; f != end; ++f) {
+    const YAML::Node v = node[f->name];
+    if (!v) throw std::runtime_error(source + ": " + where + "." + f->name + ": missing");
+    p.*(f->member) = readNumber(v, where + "." + f->name, source);
   }
+  if (saturating && node["c6"])
+    throw std::runtime_error(source + ": " + where + ".c6: not a parameter of the saturating form (v0 sets the volume dependence)");
+  if (!saturating)
+    if (const YAML::Node v = node["td"]) p.td = readNumber(v, where + ".td", source);
   try {
     p.validate();
   } catch (const std::invalid_argument& e) {
@@ -84,15 +103,14 @@ ParameterSet loadParameterSet(const std::string& path) {
 
 std::string formatParameterSet(const ParameterSet& set) {
   const auto one = [](const ParametricParams& p) {
+    const bool saturating = p.form == ParametricForm::kSaturating;
     std::ostringstream o;
     o.precision(10);
-    o << '{';
-    bool first = true;
-    for (const Field& f : kFields) {
-      o << (first ? "" : ", ") << f.name << ": " << p.*(f.member);
-      first = false;
-    }
-    o << ", td: " << p.td;
+    o << "{form: " << (saturating ? kSaturatingName : kEq55Name);
+    const Field* begin = saturating ? std::begin(kSaturatingFields) : std::begin(kEq55Fields);
+    const Field* end = saturating ? std::end(kSaturatingFields) : std::end(kEq55Fields);
+    for (const Field* f = begin; f != end; ++f) o << ", " << f->name << ": " << p.*(f->member);
+    if (!saturating) o << ", td: " << p.td;
     o << '}';
     return o.str();
   };

@@ -23,37 +23,31 @@ bool allFinite(const std::vector<double>& v) {
 class ParametricDynamics : public ScalarDynamics {
  public:
   ParametricDynamics(const ParametricModel& m, const ParametricInputs& in, double dt, double bias_pa_per_s = 0.0)
-      : m_(m), in_(in), dt_(dt), bias_(bias_pa_per_s * dt), td_(std::min(m.params().td, dt)),
-        inv_tau_(1.0 / m.tau(in)), c5v_(m.params().c5 * in.volume_rate * 1e6) {}
+      : m_(m), in_(in), dt_(dt), bias_(bias_pa_per_s * dt), td_(std::min(m.params().td, dt)) {}
   double step(double p, double u, double* dp, double* du) const override {
-    if (!dp && !du) return exact<false>(p, terms(u), dt_, nullptr, nullptr) + bias_;
-    double a, b;
-    const double next = exact<true>(p, terms(u), dt_, &a, &b);
-    if (dp) *dp = a;
-    if (du) *du = b;
-    return next + bias_;
+    return m_.advance(p, terms(u), dt_, dp, du) + bias_;
   }
-  // Same formulas as ParametricModel::stepDelayed / step, with the command terms s(u),
-  // r(u) cached: in a rollout w_i = u_{i-1}, so each command's terms are computed once.
+  // ParametricModel::stepDelayed with each command's terms cached: in a rollout
+  // w_i = u_{i-1}, so each command's terms are computed once.
   double stepWithMemory(double p, double w, double u, double* dp, double* dw, double* du) const override {
     if (td_ <= 0.0) {
       if (dw) *dw = 0.0;
       return step(p, u, dp, du);
     }
     if (!dp && !dw && !du) {  // rollout: values only
-      const double mid = exact<false>(p, terms(w), td_, nullptr, nullptr);
+      const double mid = m_.advance(p, terms(w), td_);
       if (td_ >= dt_) return mid + bias_;
-      return exact<false>(mid, terms(u), dt_ - td_, nullptr, nullptr) + bias_;
+      return m_.advance(mid, terms(u), dt_ - td_) + bias_;
     }
     double a1, b1, a2, b2;
-    const double mid = exact<true>(p, terms(w), td_, &a1, &b1);
+    const double mid = m_.advance(p, terms(w), td_, &a1, &b1);
     if (td_ >= dt_) {
       if (dp) *dp = a1;
       if (dw) *dw = b1;
       if (du) *du = 0.0;
       return mid + bias_;
     }
-    const double next = exact<true>(mid, terms(u), dt_ - td_, &a2, &b2);
+    const double next = m_.advance(mid, terms(u), dt_ - td_, &a2, &b2);
     if (dp) *dp = a2 * a1;
     if (dw) *dw = a2 * b1;
     if (du) *du = b2;
@@ -61,48 +55,21 @@ class ParametricDynamics : public ScalarDynamics {
   }
 
  private:
-  struct Terms {
-    double u = std::numeric_limits<double>::quiet_NaN(), s = 0, ds = 0, r = 0, dr = 0;
-  };
-  const Terms& terms(double u) const {
-    if (cache_[0].u == u) return cache_[0];
-    if (cache_[1].u == u) return cache_[1];
-    Terms& t = cache_[next_];
+  const ParametricModel::CommandTerms& terms(double u) const {
+    if (cache_u_[0] == u) return cache_[0];
+    if (cache_u_[1] == u) return cache_[1];
+    const int slot = next_;
     next_ ^= 1;
-    t.u = u;
-    t.s = m_.steadyState(u, in_, &t.ds);
-    t.r = m_.rate(u, &t.dr);
-    return t;
-  }
-  // ParametricModel::step: pdot = A - k p, A = s r / tau, k = (r - c5 vdot) / tau.
-  template <bool derivatives>
-  double exact(double p, const Terms& t, double dt, double* dp_dp, double* dp_du) const {
-    const double A = t.s * t.r * inv_tau_;
-    const double k = (t.r - c5v_) * inv_tau_;
-    const double x = k * dt;
-    const double E = fastExp(-x);
-    double E1, dE1 = 0;
-    if (std::abs(x) < 1e-4) {
-      E1 = dt * (1.0 - x * (0.5 - x / 6.0));
-      if (derivatives) dE1 = dt * dt * (-0.5 + x / 3.0);
-    } else {
-      const double inv_k = 1.0 / k;
-      E1 = (1.0 - E) * inv_k;
-      if (derivatives) dE1 = (dt * E - E1) * inv_k;
-    }
-    if (derivatives) {
-      *dp_dp = E;
-      const double dA = (t.ds * t.r + t.s * t.dr) * inv_tau_;
-      const double dk = t.dr * inv_tau_;
-      *dp_du = dA * E1 + (A * dE1 - dt * p * E) * dk;
-    }
-    return p * E + A * E1;
+    cache_u_[slot] = u;
+    cache_[slot] = m_.terms(u, in_);
+    return cache_[slot];
   }
 
   const ParametricModel& m_;
   ParametricInputs in_;
-  double dt_, bias_, td_, inv_tau_, c5v_;
-  mutable Terms cache_[2];
+  double dt_, bias_, td_;
+  mutable ParametricModel::CommandTerms cache_[2];
+  mutable double cache_u_[2] = {kNaN, kNaN};
   mutable int next_ = 0;
 };
 }  // namespace

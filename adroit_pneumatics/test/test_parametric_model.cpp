@@ -129,3 +129,187 @@ TEST(Parametric, DeadTimeStep) {
   prm.td = -0.001;
   EXPECT_THROW(ParametricModel{prm}, std::invalid_argument);
 }
+
+namespace {
+ParametricParams saturating() {
+  ParametricParams p = sample();
+  p.form = ParametricForm::kSaturating;
+  p.c5 = -1.4, p.v0 = 0.05, p.c7 = 300, p.c9 = 40, p.u_sat = 4.0, p.e_fill = 150e3, p.e_exhaust = 900e3;
+  return p;
+}
+// RK4 on pressureRate at dt / n.
+double integrate(const ParametricModel& m, double p, double u, double dt, const ParametricInputs& in, int n = 200000) {
+  const double h = dt / n;
+  for (int k = 0; k < n; ++k) {
+    const double k1 = m.pressureRate(p, u, in), k2 = m.pressureRate(p + h / 2 * k1, u, in);
+    const double k3 = m.pressureRate(p + h / 2 * k2, u, in), k4 = m.pressureRate(p + h * k3, u, in);
+    p += h / 6 * (k1 + 2 * k2 + 2 * k3 + k4);
+  }
+  return p;
+}
+}  // namespace
+
+TEST(Saturating, ExactStepMatchesFineIntegration) {
+  const ParametricModel m(saturating());
+  ParametricInputs in = inputs();
+  // Fills from the room and exhausts from the supply (deep in the saturated, constant-rate
+  // part), small moves near equilibrium, compression and expansion of the chamber.
+  for (double vdot : {-8e-6, 0.0, 2e-6}) {
+    in.volume_rate = vdot;
+    for (double p0 : {101325.0, 250e3, 590e3}) {
+      for (double u : {-3.0, -0.05, 0.3, 3.0}) {
+        for (double dt : {0.002, 0.005, 0.05}) {
+          const double exact = m.step(p0, u, dt, in);
+          EXPECT_NEAR(exact, integrate(m, p0, u, dt, in, 20000), 1e-6 * p0) << "p0 " << p0 << " u " << u << " dt " << dt << " vdot " << vdot;
+        }
+      }
+    }
+  }
+  // The saturation is real: a fill from the room runs slower than eq. 5.5's exponential
+  // with the same k and s* would (here by more than 20 %).
+  in.volume_rate = 0;
+  const ParametricModel::CommandTerms t = m.terms(3.0, in);
+  const double linear = t.a / t.k + (101325.0 - t.a / t.k) * std::exp(-t.k * 0.002);
+  EXPECT_LT(m.step(101325.0, 3.0, 0.002, in) - 101325.0, 0.8 * (linear - 101325.0));
+}
+
+TEST(Saturating, DerivativesMatchFiniteDifferences) {
+  ParametricParams prm = saturating();
+  prm.td = 0.0021;
+  const ParametricModel m(prm);
+  ParametricInputs in = inputs();
+  for (double vdot : {-8e-6, 0.0, 2e-6}) {
+    in.volume_rate = vdot;
+    for (double p : {101325.0, 300e3, 600e3}) {
+      for (double w : {-2.0, 0.2, 3.0}) {
+        for (double u : {-1.5, 0.0, 0.1, 2.5}) {
+          double dp, dw, du;
+          m.stepDelayed(p, w, u, 0.005, in, &dp, &dw, &du);
+          const double h = 1e-5, hp = 1.0;
+          const auto at = [&](double pp, double ww, double uu) { return m.stepDelayed(pp, ww, uu, 0.005, in); };
+          const double fd_p = (at(p + hp, w, u) - at(p - hp, w, u)) / (2 * hp);
+          const double fd_w = (at(p, w + h, u) - at(p, w - h, u)) / (2 * h);
+          const double fd_u = (at(p, w, u + h) - at(p, w, u - h)) / (2 * h);
+          const std::string where = "p " + std::to_string(p) + " w " + std::to_string(w) + " u " + std::to_string(u);
+          EXPECT_NEAR(dp, fd_p, 1e-6) << where;
+          EXPECT_NEAR(dw, fd_w, 1e-4 * std::abs(fd_w) + 1.0) << where;
+          EXPECT_NEAR(du, fd_u, 1e-4 * std::abs(fd_u) + 1.0) << where;
+        }
+      }
+    }
+  }
+  // At equilibrium (x0 = 0) the step stays there and d/dp is the linear decay.
+  in.volume_rate = 0;
+  const ParametricModel::CommandTerms t = m.terms(0.4, in);
+  double dp;
+  EXPECT_DOUBLE_EQ(m.advance(t.a / t.k, t, 0.005, &dp), t.a / t.k);
+  EXPECT_NEAR(dp, std::exp(-t.k * 0.005), 1e-12);
+}
+
+TEST(Saturating, IsEq55WithoutSaturation) {
+  // eq. 5.5 with tau = 1 + c6 v maps exactly onto the saturating form with v0 = 1/c6 and
+  // c5, c7, c9 divided by 1 + c6; e_fill, e_exhaust, u_sat -> infinity leave the rest.
+  ParametricParams eq55 = sample();
+  eq55.c6 = 2.5;
+  const ParametricModel a(eq55), b(saturatingFromEq55(eq55, 1e15, 1e15, 1e15));
+  ParametricInputs in = inputs();
+  for (double v : {0.3e-6, 1.2e-6, 2.2e-6}) {
+    in.volume = v;
+    for (double p : {101325.0, 400e3})
+      for (double u : {-2.0, 0.0, 1.0}) EXPECT_NEAR(b.step(p, u, 0.005, in), a.step(p, u, 0.005, in), 1e-6 * p);
+  }
+  // With finite saturation they differ.
+  const ParametricModel c(saturatingFromEq55(eq55, 100e3, 1e6, 3.0));
+  EXPECT_GT(std::abs(c.step(101325.0, 2.0, 0.005, in) - a.step(101325.0, 2.0, 0.005, in)), 1e3);
+}
+
+TEST(Saturating, StaysFiniteWhenCompressionDominates) {
+  // A piston compressing the chamber faster than the valve acts: k is floored, the step
+  // stays finite and continuous in vdot.
+  const ParametricModel m(saturating());
+  ParametricInputs in = inputs();
+  double last = std::nan("");
+  for (double vdot = -1e-4; vdot <= 0; vdot += 1e-6) {
+    in.volume_rate = vdot;
+    double dp, du;
+    const double p = m.step(300e3, 0.0, 0.005, in, &dp, &du);
+    ASSERT_TRUE(std::isfinite(p) && std::isfinite(dp) && std::isfinite(du)) << vdot;
+    if (std::isfinite(last)) ASSERT_LT(std::abs(p - last), 5e3) << vdot;
+    last = p;
+  }
+  // Zero volume (a missing length reading) with the smallest v0: finite.
+  ParametricParams prm = saturating();
+  prm.v0 = 1e-6;
+  in.volume = 0, in.volume_rate = 0;
+  EXPECT_TRUE(std::isfinite(ParametricModel(prm).step(300e3, 1.0, 0.005, in)));
+}
+
+TEST(Saturating, RejectsBadParametersNamingThem) {
+  const auto message = [](ParametricParams p) {
+    try {
+      ParametricModel{p};
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  ParametricParams p = saturating();
+  p.e_fill = 0;
+  EXPECT_NE(message(p).find("e_fill"), std::string::npos);
+  p = saturating();
+  p.v0 = -0.1;
+  EXPECT_NE(message(p).find("v0"), std::string::npos);
+  p = saturating();
+  p.u_sat = std::nan("");
+  EXPECT_EQ(message(p), "parametric model: u_sat is not finite");
+  // The eq. 5.5 form ignores the saturating form's fields.
+  p.form = ParametricForm::kEq55;
+  EXPECT_EQ(message(p), "parametric model: u_sat is not finite");  // but never a NaN
+  p.u_sat = -1;
+  EXPECT_EQ(message(p), "no error");
+}
+
+TEST(ParamsIo, SaturatingFormRoundTripAndFieldErrors) {
+  ParameterSet set;
+  set.defaults = saturating();
+  set.defaults.td = 0.0021;
+  set.cylinders["A_WRJ1_flex"] = sample();  // forms mix per cylinder
+  const ParameterSet back = parseParameterSet(formatParameterSet(set));
+  EXPECT_EQ(back.defaults.form, ParametricForm::kSaturating);
+  EXPECT_DOUBLE_EQ(back.defaults.e_fill, 150e3);
+  EXPECT_DOUBLE_EQ(back.defaults.v0, 0.05);
+  EXPECT_DOUBLE_EQ(back.defaults.td, 0.0021);
+  EXPECT_EQ(back.forCylinder("A_WRJ1_flex").form, ParametricForm::kEq55);
+  auto message = [](const std::string& text) {
+    try {
+      parseParameterSet(text, "x.yaml");
+    } catch (const std::runtime_error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  const std::string full =
+      "form: saturating, c2: 0, c3: 2, c4: 0.5, c5: -1.4, v0: 0.01, c7: 300, c8: 0.4, c9: 40, cg: 0.2, u_sat: 4, "
+      "e_fill: 150000, e_exhaust: 1000000, td: 0.002";
+  EXPECT_EQ(message("parametric:\n  default: {" + full + "}\n"), "no error");
+  // Every field of the saturating form is required (td too), and each is named.
+  for (const char* field : {"c5", "v0", "c7", "u_sat", "e_fill", "e_exhaust", "td"}) {
+    std::string text = full;
+    const std::size_t at = text.find(std::string(", ") + field + ":");
+    const std::size_t end = text.find(',', at + 2);
+    text.erase(at, end - at);
+    EXPECT_EQ(message("parametric:\n  default: {" + text + "}\n"), std::string("x.yaml: parametric.default.") + field + ": missing");
+  }
+  std::string nan = full;
+  nan.replace(nan.find("e_fill: 150000"), 14, "e_fill: .nan");
+  EXPECT_EQ(message("parametric:\n  default: {" + nan + "}\n"), "x.yaml: parametric.default.e_fill: not finite");
+  std::string inf = full;
+  inf.replace(inf.find("v0: 0.01"), 8, "v0: .inf");
+  EXPECT_EQ(message("parametric:\n  default: {" + inf + "}\n"), "x.yaml: parametric.default.v0: not finite");
+  EXPECT_EQ(message("parametric:\n  default: {" + full + ", c6: 1}\n").rfind("x.yaml: parametric.default.c6: ", 0), 0u);
+  EXPECT_EQ(message("parametric:\n  default: {form: lambert, c2: 0}\n"),
+            "x.yaml: parametric.default.form: expected eq5.5 or saturating");
+  // Eq. 5.5 files without a form (all files before it existed) load as before.
+  EXPECT_EQ(parseParameterSet("parametric:\n  default: {c2: 0, c3: 2, c4: 0.5, c5: 0, c6: 0, c7: 80, c8: 0.2, c9: 10, "
+                              "cg: 0.3}\n").defaults.form, ParametricForm::kEq55);
+}

@@ -54,10 +54,15 @@ struct FitOptions {
   int long_segment = 100;      // final joint stage: longer open-loop segments (closer to the
                                // 2 s prediction criterion); <= segment skips it
   bool multi_start = true;     // several starting points for the steady state and the rate
+  // kSaturating: eq. 5.5 is fitted first (as above), mapped onto the saturating form
+  // (saturatingFromEq55) and the rate, volume, dead time and saturation (u_sat, e_fill,
+  // e_exhaust) refitted from there by the same stages.
+  ParametricForm form = ParametricForm::kEq55;
 };
 
 // (a) Steady state from a slow sweep: c2, c3, c4 (multi-start). (b) Rate from low-passed
-// random commands: c7, c8, c9, cg (+ c5, c6 if fit_volume, + td if fit_dead_time), by
+// random commands: c7, c8, c9, cg (+ c5, c6 or v0 if fit_volume, + td if fit_dead_time,
+// + u_sat, e_fill, e_exhaust for the saturating form), by
 // multi-step simulation error over segments of `segment` samples (multi-start), then all
 // parameters jointly, then all jointly on segments of `long_segment` samples.
 FitReport fitParametricModel(const Recording& sweep, const Recording& random, const FitOptions& options,
@@ -65,6 +70,13 @@ FitReport fitParametricModel(const Recording& sweep, const Recording& random, co
 // Older form: FitOptions with fit_volume and segment as given.
 FitReport fitParametricModel(const Recording& sweep, const Recording& random, bool fit_volume,
                              int segment = 20, const ParametricParams& initial = {});
+
+// Conditioning of the fitted parameters: the condition number of the Jacobian of the
+// multi-step residuals (segments of `segment` samples) with respect to the parameters the fit
+// moves, each in units of its own size (of a floor for the few that sit at or near zero:
+// c2, c8 0.1, c4 1, td 1 ms, v0 0.1 cm^3). Scale-degenerate parameters (eq. 5.5's c5, c6,
+// c7, c9 with c6 v >> 1) give a huge number.
+double parameterConditionNumber(const Recording& rec, const ParametricParams& prm, int segment = 100);
 
 struct PredictionReport {
   double rmse = 0;          // Pa over all windows

@@ -234,7 +234,9 @@ TEST(Saturating, StaysFiniteWhenCompressionDominates) {
     double dp, du;
     const double p = m.step(300e3, 0.0, 0.005, in, &dp, &du);
     ASSERT_TRUE(std::isfinite(p) && std::isfinite(dp) && std::isfinite(du)) << vdot;
-    if (std::isfinite(last)) ASSERT_LT(std::abs(p - last), 5e3) << vdot;
+    if (std::isfinite(last)) {
+      ASSERT_LT(std::abs(p - last), 5e3) << vdot;
+    }
     last = p;
   }
   // Zero volume (a missing length reading) with the smallest v0: finite.

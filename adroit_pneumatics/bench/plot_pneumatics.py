@@ -27,31 +27,40 @@ def read_columns(path):
     return {key: [float(r[key]) for r in rows] for key in rows[0]}
 
 
+def pressure_figure(c):
+    """Pressure panel over a command panel; returns fig, top, bottom and a column in kPa."""
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(10, 6), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
+    return fig, top, bottom, lambda key: [v / 1e3 for v in c[key]]
+
+
+def finish(fig, top, bottom, path):
+    top.set_ylabel("pressure [kPa]")
+    top.legend(loc="upper right", fontsize=8)
+    bottom.set_ylabel("valve command [V]")
+    bottom.set_xlabel("time [s]")
+    fig.tight_layout()
+    fig.savefig(path[:-len(".csv")] + ".png", dpi=90)
+    plt.close(fig)
+
+
 def plot_tracking(path):
     """Columns: t, reference, ilqg, pidf [, floor], ilqg_u, pidf_u (s, Pa, V)."""
     c = read_columns(path)
     if not c:
         return
     case = os.path.basename(path)[len("tracking_"):-len(".csv")]
-    fig, (top, bottom) = plt.subplots(2, 1, figsize=(10, 6), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
-    kpa = lambda key: [v / 1e3 for v in c[key]]  # noqa: E731
+    fig, top, bottom, kpa = pressure_figure(c)
     top.plot(c["t"], kpa("reference"), color="black", linewidth=1.0, label="reference")
     if "floor" in c:
         top.plot(c["t"], kpa("floor"), color="tab:green", linewidth=0.8, linestyle="--",
                  label="floor (valve at the limit at each jump, oracle stop)")
     top.plot(c["t"], kpa("pidf"), color="tab:orange", linewidth=0.9, label="PIDF")
     top.plot(c["t"], kpa("ilqg"), color="tab:blue", linewidth=0.9, label="iLQG")
-    top.set_ylabel("pressure [kPa]")
     top.set_title("pressure tracking: " + case.replace("_", " "))
-    top.legend(loc="upper right", fontsize=8)
     bottom.plot(c["t"], c["pidf_u"], color="tab:orange", linewidth=0.8, label="PIDF")
     bottom.plot(c["t"], c["ilqg_u"], color="tab:blue", linewidth=0.8, label="iLQG")
-    bottom.set_ylabel("valve command [V]")
-    bottom.set_xlabel("time [s]")
     bottom.legend(loc="upper right", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path[:-len(".csv")] + ".png", dpi=90)
-    plt.close(fig)
+    finish(fig, top, bottom, path)
 
 
 def plot_identification(path, window=2.0):
@@ -60,8 +69,7 @@ def plot_identification(path, window=2.0):
     if not c:
         return
     case = os.path.basename(path)[len("identification_"):-len(".csv")]
-    fig, (top, bottom) = plt.subplots(2, 1, figsize=(10, 6), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
-    kpa = lambda key: [v / 1e3 for v in c[key]]  # noqa: E731
+    fig, top, bottom, kpa = pressure_figure(c)
     top.plot(c["t"], kpa("measured"), color="black", linewidth=1.0, label="measured")
     top.plot(c["t"], kpa("eq55"), color="tab:orange", linewidth=0.9, label="eq. 5.5")
     top.plot(c["t"], kpa("saturating"), color="tab:blue", linewidth=0.9, label="saturating form")
@@ -69,15 +77,9 @@ def plot_identification(path, window=2.0):
     for ax in (top, bottom):
         for t in starts:
             ax.axvline(t, color="grey", linewidth=0.6, linestyle=":")
-    top.set_ylabel("pressure [kPa]")
     top.set_title("open-loop prediction, restarted from the measurement every %g s: %s" % (window, case))
-    top.legend(loc="upper right", fontsize=8)
     bottom.plot(c["t"], c["volts"], color="tab:gray", linewidth=0.8)
-    bottom.set_ylabel("valve command [V]")
-    bottom.set_xlabel("time [s]")
-    fig.tight_layout()
-    fig.savefig(path[:-len(".csv")] + ".png", dpi=90)
-    plt.close(fig)
+    finish(fig, top, bottom, path)
 
 
 def main(out_dir):

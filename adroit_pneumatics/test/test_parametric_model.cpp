@@ -22,6 +22,16 @@ ParametricInputs inputs() {
 }
 }  // namespace
 
+// The error message of parsing text as a parameter file ("no error" if it parses).
+static std::string parseMessage(const std::string& text) {
+  try {
+    parseParameterSet(text, "x.yaml");
+  } catch (const std::runtime_error& e) {
+    return std::string(e.what());
+  }
+  return std::string("no error");
+}
+
 TEST(Parametric, ExactStepMatchesFineIntegration) {
   const ParametricModel m(sample());
   for (double u : {-2.0, -0.05, 0.3, 1.5}) {
@@ -82,21 +92,13 @@ TEST(ParamsIo, RoundTripAndMalformedFieldNamed) {
   EXPECT_DOUBLE_EQ(back.defaults.c4, 0.4);
   EXPECT_DOUBLE_EQ(back.forCylinder("A_FFJ2_flex").c7, 55);
   EXPECT_DOUBLE_EQ(back.forCylinder("other").c7, 80);
-  auto message = [](const std::string& text) {
-    try {
-      parseParameterSet(text, "x.yaml");
-    } catch (const std::runtime_error& e) {
-      return std::string(e.what());
-    }
-    return std::string("no error");
-  };
-  EXPECT_EQ(message("parametric:\n  default: {c2: 0, c3: 1, c4: 0, c5: 0, c6: 0, c8: 0, c9: 1, cg: 0.1}\n"),
+  EXPECT_EQ(parseMessage("parametric:\n  default: {c2: 0, c3: 1, c4: 0, c5: 0, c6: 0, c8: 0, c9: 1, cg: 0.1}\n"),
             "x.yaml: parametric.default.c7: missing");
-  EXPECT_EQ(message("parametric:\n  default: {c2: 0, c3: 1, c4: 0, c5: 0, c6: 0, c7: abc, c8: 0, c9: 1, cg: 0.1}\n"),
+  EXPECT_EQ(parseMessage("parametric:\n  default: {c2: 0, c3: 1, c4: 0, c5: 0, c6: 0, c7: abc, c8: 0, c9: 1, cg: 0.1}\n"),
             "x.yaml: parametric.default.c7: expected a number");
-  EXPECT_NE(message("parametric: [").find("not valid YAML"), std::string::npos);
-  EXPECT_EQ(message("other: 1\n"), "x.yaml: parametric: missing");
-  EXPECT_NE(message("parametric:\n  default: {c2: 0, c3: 1, c4: 0, c5: 0, c6: 0, c7: 1, c8: 0, c9: -1, cg: 0.1}\n").find("c9"),
+  EXPECT_NE(parseMessage("parametric: [").find("not valid YAML"), std::string::npos);
+  EXPECT_EQ(parseMessage("other: 1\n"), "x.yaml: parametric: missing");
+  EXPECT_NE(parseMessage("parametric:\n  default: {c2: 0, c3: 1, c4: 0, c5: 0, c6: 0, c7: 1, c8: 0, c9: -1, cg: 0.1}\n").find("c9"),
             std::string::npos);
 }
 
@@ -282,34 +284,26 @@ TEST(ParamsIo, SaturatingFormRoundTripAndFieldErrors) {
   EXPECT_DOUBLE_EQ(back.defaults.v0, 0.05);
   EXPECT_DOUBLE_EQ(back.defaults.td, 0.0021);
   EXPECT_EQ(back.forCylinder("A_WRJ1_flex").form, ParametricForm::kEq55);
-  auto message = [](const std::string& text) {
-    try {
-      parseParameterSet(text, "x.yaml");
-    } catch (const std::runtime_error& e) {
-      return std::string(e.what());
-    }
-    return std::string("no error");
-  };
   const std::string full =
       "form: saturating, c2: 0, c3: 2, c4: 0.5, c5: -1.4, v0: 0.01, c7: 300, c8: 0.4, c9: 40, cg: 0.2, u_sat: 4, "
       "e_fill: 150000, e_exhaust: 1000000, td: 0.002";
-  EXPECT_EQ(message("parametric:\n  default: {" + full + "}\n"), "no error");
+  EXPECT_EQ(parseMessage("parametric:\n  default: {" + full + "}\n"), "no error");
   // Every field of the saturating form is required (td too), and each is named.
   for (const char* field : {"c5", "v0", "c7", "u_sat", "e_fill", "e_exhaust", "td"}) {
     std::string text = full;
     const std::size_t at = text.find(std::string(", ") + field + ":");
     const std::size_t end = text.find(',', at + 2);
     text.erase(at, end - at);
-    EXPECT_EQ(message("parametric:\n  default: {" + text + "}\n"), std::string("x.yaml: parametric.default.") + field + ": missing");
+    EXPECT_EQ(parseMessage("parametric:\n  default: {" + text + "}\n"), std::string("x.yaml: parametric.default.") + field + ": missing");
   }
   std::string nan = full;
   nan.replace(nan.find("e_fill: 150000"), 14, "e_fill: .nan");
-  EXPECT_EQ(message("parametric:\n  default: {" + nan + "}\n"), "x.yaml: parametric.default.e_fill: not finite");
+  EXPECT_EQ(parseMessage("parametric:\n  default: {" + nan + "}\n"), "x.yaml: parametric.default.e_fill: not finite");
   std::string inf = full;
   inf.replace(inf.find("v0: 0.01"), 8, "v0: .inf");
-  EXPECT_EQ(message("parametric:\n  default: {" + inf + "}\n"), "x.yaml: parametric.default.v0: not finite");
-  EXPECT_EQ(message("parametric:\n  default: {" + full + ", c6: 1}\n").rfind("x.yaml: parametric.default.c6: ", 0), 0u);
-  EXPECT_EQ(message("parametric:\n  default: {form: lambert, c2: 0}\n"),
+  EXPECT_EQ(parseMessage("parametric:\n  default: {" + inf + "}\n"), "x.yaml: parametric.default.v0: not finite");
+  EXPECT_EQ(parseMessage("parametric:\n  default: {" + full + ", c6: 1}\n").rfind("x.yaml: parametric.default.c6: ", 0), 0u);
+  EXPECT_EQ(parseMessage("parametric:\n  default: {form: lambert, c2: 0}\n"),
             "x.yaml: parametric.default.form: expected eq5.5 or saturating");
   // Eq. 5.5 files without a form (all files before it existed) load as before.
   EXPECT_EQ(parseParameterSet("parametric:\n  default: {c2: 0, c3: 2, c4: 0.5, c5: 0, c6: 0, c7: 80, c8: 0.2, c9: 10, "

@@ -6,7 +6,7 @@
 //   mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned]
 //               [--out DIR] [--seed S] [--fixed-latency S] [--latency-sweep S,S,...]
 //               [--dt S] [--horizon S] [--skip K] [--sensed] [--contact M,S] [--events]
-//               [--set key=number]...
+//               [--set key=number]... [--pool ilqg_key=number]...
 //
 // --dt, --horizon, --skip override the task's planner_dt and horizon hints and the iLQG
 // derivative skip (defaults: config/tasks/<task>.yaml, config/mpc.yaml).
@@ -23,6 +23,8 @@
 // --events: print each trial's task events (phase, relocation stage, keys) with their time.
 // --set key=number: a task parameter (weight, threshold) over config/tasks/<task>.yaml, for
 // tuning without a rebuild (the --latency-sweep runs use it too).
+// --pool ilqg_key=number: a setting of the pools' iLQG (names of IlqgParams, setIlqgParam),
+// over config/pools.yaml's (iterations 2, the rest IlqgParams' defaults).
 //
 // Closed loop in emulated real time, ROS-free, against the simulation driver's core
 // (adroit_driver::SimulatedRobot: the physical scene in 2 ms steps, the pneumatic plant,
@@ -55,7 +57,10 @@
 // Writes DIR/success_trials.csv (one row per trial), DIR/success_traces.csv (the first trial
 // of each task and variant, error over time) and plots them with plot_success.py into
 // DIR/success_<task>.png, and DIR/states_<task>_<variant>.csv (the first trial's joint
-// positions, for render_states). Ends with RESULT lines (DESIGN.md section 5).
+// positions, for render_states); pneumatic variants also DIR/forces_<task>_<variant>.csv (the
+// first trial's planned and sensed tension per cylinder at the pools' ticks) and print the
+// force tracking per group next to the plant's floor (adroit_pneumatics ForceTrackingAudit).
+// Ends with RESULT lines (DESIGN.md section 5).
 #include <adroit_core/mujoco_model.h>
 #include <adroit_core/timing_stats.h>
 #include <adroit_description/cylinders.h>

@@ -9,7 +9,11 @@
 using namespace adroit::pneumatics;
 
 namespace {
-Recording generate(const ParametricModel& m, const std::string& kind, double seconds, std::uint64_t seed) {
+// Noise-free data of model m under an excitation; moving: the piston pumps the volume at
+// 1.3 Hz (the volume rate is its derivative), else a fixed volume. The model's dead time
+// applies (the previous sample's command for its first td).
+Recording generate(const ParametricModel& m, const std::string& kind, double seconds, std::uint64_t seed,
+                   bool moving = false) {
   ExcitationParams e;
   e.kind = kind;
   e.seed = seed;
@@ -17,16 +21,17 @@ Recording generate(const ParametricModel& m, const std::string& kind, double sec
   Excitation ex(e);
   Recording r;
   r.dt = 0.005;
-  double p = 101325;
+  const double w_pump = 2 * 3.14159265 * 1.3;
+  double p = 101325, w = 0.0;
   for (int k = 0; k < static_cast<int>(seconds / r.dt); ++k) {
-    const double u = ex.next(k * r.dt, r.dt);
-    const double supply = 620e3 - 10e3 * std::sin(0.3 * k * r.dt);
+    const double t = k * r.dt, u = ex.next(t, r.dt);
     r.volts.push_back(u);
     r.pressure.push_back(p);
-    r.volume.push_back(1.5e-6);
-    r.volume_rate.push_back(0.0);
-    r.supply.push_back(supply);
-    p = m.step(p, u, r.dt, r.inputs(r.size() - 1));
+    r.volume.push_back(moving ? 1.3e-6 + 0.9e-6 * std::sin(w_pump * t) : 1.5e-6);
+    r.volume_rate.push_back(moving ? 0.9e-6 * w_pump * std::cos(w_pump * t) : 0.0);
+    r.supply.push_back(620e3 - 10e3 * std::sin(0.3 * t));
+    p = m.stepDelayed(p, k ? w : u, u, r.dt, r.inputs(r.size() - 1));
+    w = u;
   }
   return r;
 }
@@ -106,29 +111,9 @@ TEST(Sysid, RecoversDeadTime) {
   truth.c2 = 0.05, truth.c3 = 2.5, truth.c4 = 0.3, truth.c7 = 70, truth.c8 = 0.15, truth.c9 = 12, truth.cg = 0.25;
   truth.td = 0.002;
   const ParametricModel m(truth);
-  auto gen = [&](const std::string& kind, double seconds, std::uint64_t seed) {
-    ExcitationParams e;
-    e.kind = kind;
-    e.seed = seed;
-    Excitation ex(e);
-    Recording r;
-    r.dt = 0.005;
-    double p = 101325, w = 0.0;
-    for (int k = 0; k < static_cast<int>(seconds / r.dt); ++k) {
-      const double u = ex.next(k * r.dt, r.dt);
-      r.volts.push_back(u);
-      r.pressure.push_back(p);
-      r.volume.push_back(1.5e-6);
-      r.volume_rate.push_back(0.0);
-      r.supply.push_back(620e3);
-      p = m.stepDelayed(p, k ? w : u, u, r.dt, r.inputs(r.size() - 1));
-      w = u;
-    }
-    return r;
-  };
-  const FitReport rep = fitParametricModel(gen("sweep", 40.0, 1), gen("random", 20.0, 2), FitOptions{});
+  const FitReport rep = fitParametricModel(generate(m, "sweep", 40.0, 1), generate(m, "random", 20.0, 2), FitOptions{});
   EXPECT_NEAR(rep.params.td, 0.002, 0.0002);
-  EXPECT_LT(predictionRmse(gen("random", 10.0, 3), ParametricModel(rep.params)).percent, 0.5);
+  EXPECT_LT(predictionRmse(generate(m, "random", 10.0, 3), ParametricModel(rep.params)).percent, 0.5);
 }
 
 TEST(Sysid, RecoversSaturatingModelFromItsOwnData) {
@@ -139,31 +124,10 @@ TEST(Sysid, RecoversSaturatingModelFromItsOwnData) {
   truth.c2 = 0.05, truth.c3 = 2.5, truth.c4 = 0.3, truth.c5 = -1.4, truth.v0 = 0.05, truth.c7 = 250, truth.c8 = 0.3;
   truth.c9 = 40, truth.cg = 0.25, truth.u_sat = 4.0, truth.e_fill = 150e3, truth.e_exhaust = 900e3, truth.td = 0.002;
   const ParametricModel m(truth);
-  auto gen = [&](const std::string& kind, double seconds, std::uint64_t seed, bool moving) {
-    ExcitationParams e;
-    e.kind = kind;
-    e.seed = seed;
-    e.sweep_period = 20.0;
-    Excitation ex(e);
-    Recording r;
-    r.dt = 0.005;
-    double p = 101325, w = 0.0;
-    for (int k = 0; k < static_cast<int>(seconds / r.dt); ++k) {
-      const double t = k * r.dt, u = ex.next(t, r.dt);
-      r.volts.push_back(u);
-      r.pressure.push_back(p);
-      r.volume.push_back(moving ? 1.3e-6 + 0.9e-6 * std::sin(2 * 3.14159265 * 1.3 * t) : 1.3e-6);
-      r.volume_rate.push_back(moving ? 0.9e-6 * 2 * 3.14159265 * 1.3 * std::cos(2 * 3.14159265 * 1.3 * t) : 0.0);
-      r.supply.push_back(620e3);
-      p = m.stepDelayed(p, k ? w : u, u, r.dt, r.inputs(r.size() - 1));
-      w = u;
-    }
-    return r;
-  };
   FitOptions o;
   o.form = ParametricForm::kSaturating;
   o.fit_volume = true;
-  const FitReport rep = fitParametricModel(gen("sweep", 40.0, 1, false), gen("random", 30.0, 2, true), o);
+  const FitReport rep = fitParametricModel(generate(m, "sweep", 40.0, 1), generate(m, "random", 30.0, 2, true), o);
   const ParametricParams& q = rep.params;
   ASSERT_EQ(q.form, ParametricForm::kSaturating);
   EXPECT_NEAR(q.td, truth.td, 0.0001);
@@ -173,5 +137,5 @@ TEST(Sysid, RecoversSaturatingModelFromItsOwnData) {
   EXPECT_NEAR(q.u_sat, truth.u_sat, 0.1 * truth.u_sat);
   EXPECT_NEAR(q.e_fill, truth.e_fill, 0.05 * truth.e_fill);
   EXPECT_NEAR(q.v0, truth.v0, 0.02);
-  EXPECT_LT(predictionRmse(gen("random", 10.0, 3, true), ParametricModel(q)).percent, 0.2);
+  EXPECT_LT(predictionRmse(generate(m, "random", 10.0, 3, true), ParametricModel(q)).percent, 0.2);
 }

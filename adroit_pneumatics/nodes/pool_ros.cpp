@@ -19,6 +19,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cerrno>
+#include <cstdint>
 #include <chrono>
 #include <ctime>
 #include <limits>
@@ -108,7 +109,7 @@ class PoolRos {
     const Params p(pnh);
     p.checkKeys("", {"model_file", "scene", "cylinders", "pool", "group_size", "controller", "params_file", "rate",
                      "reference_timeout", "state_timeout", "stamp_tolerance", "exhaust_volts", "ilqg", "pidf",
-                     "diagnostics_period", "realtime_priority"});
+                     "diagnostics_period", "realtime_priority", "tick_phase"});
     p.checkKeys("ilqg", {"horizon", "dt", "alpha_p", "alpha_u", "alpha_w", "u_min", "u_max", "iterations",
                          "feedback_fraction", "solve_every", "disturbance_gain", "disturbance_limit",
                          "u_des_steady_state", "measurement_gain", "measurement_band", "jump_threshold",
@@ -159,6 +160,7 @@ class PoolRos {
     const double rate = p.number("rate", 200.0, 1e-3, 2000.0);
     const double diag_period = p.number("diagnostics_period", 1.0, 1e-3, 3600.0);
     realtime_priority_ = p.integer("realtime_priority", 15, 0, 98);
+    tick_phase_ = p.number("tick_phase", 0.0, 0.0, 0.999999);
 
     pool_ = std::make_unique<CylinderPool>(std::move(cylinders), known, o);
     controller_ = o.controller;
@@ -268,18 +270,32 @@ class PoolRos {
                   name_.c_str(), priority, error.c_str(), thread);
   }
 
+  // The latest tick time <= now on this pool's grid: multiples of the period on the ROS
+  // clock, shifted by ~tick_phase periods. pools.launch gives each pool its own phase, so the
+  // pools of a machine re-solve one after another instead of all at once (pneumatics_bench
+  // --only pool: aligned vs staggered).
+  ros::Time latestTick(const ros::Time& now) const {
+    const std::int64_t period = period_.toNSec();
+    const std::int64_t offset = static_cast<std::int64_t>(tick_phase_ * static_cast<double>(period));
+    const std::int64_t t = static_cast<std::int64_t>(now.toNSec()) - offset;
+    ros::Time tick;
+    tick.fromNSec(static_cast<std::uint64_t>(t - t % period + offset));
+    return tick;
+  }
+
   void tickLoop() {
     enterRealtime(realtime_priority_, "tick");
     // Under sim time the clock reads zero until the first /clock.
     while (running_ && ros::ok() && ros::Time::now().isZero()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
-    ros::Time next = ros::Time::now();
+    ros::Time next = latestTick(ros::Time::now());
     while (running_ && ros::ok()) {
       next += period_;
       if (!waitUntil(next)) break;
       const ros::Time now = ros::Time::now();
       // Late by more than a period (descheduled, or the sim clock jumped ahead), or the
-      // clock went back: resynchronise rather than run missed ticks back to back or wait.
-      if (now - next > period_ || next - now > period_) next = now;
+      // clock went back: resynchronise onto the grid rather than run missed ticks back to
+      // back or wait.
+      if (now - next > period_ || next - now > period_) next = latestTick(now);
       const std::vector<double>& volts = pool_->update(now.toSec());
       putCommand(*slot_, now.toSec(), volts);
       sem_post(&command_ready_);  // never blocks
@@ -385,6 +401,7 @@ class PoolRos {
   ros::WallTimer diag_timer_;
   std::thread tick_, publisher_;
   std::atomic<bool> running_{false};
+  double tick_phase_ = 0.0;    // fraction of the period (latestTick)
   int realtime_priority_ = 15;  // tick thread; the publisher one below (0: normal scheduling)
   std::atomic<bool> fifo_refused_{false};
   sem_t command_ready_;

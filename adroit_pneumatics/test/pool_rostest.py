@@ -53,6 +53,7 @@ class PoolTest(unittest.TestCase):
         cls.pool = rospy.get_param("~pool")
         cls.bores = [math.pi * d * d / 4 for d in rospy.get_param("~bore_diameter")]
         cls.timeout = rospy.get_param("~reference_timeout")
+        cls.tick_phase = rospy.get_param("~tick_phase", 0.0)
         # Cylinders of other pools: their states (NaN!) and references must not disturb this pool.
         cls.others = ["A_MFJ2_flex", "A_THJ1_ext"]
         cls.state_names = cls.pool + cls.others  # the order valve command indices refer to
@@ -167,6 +168,13 @@ class PoolTest(unittest.TestCase):
         self.assertAlmostEqual(rate, RATE, delta=0.05 * RATE)
         gaps = [b - a for a, b in zip(stamps, stamps[1:])]
         self.assertLess(max(gaps), 5 * 1.0 / RATE, "a gap of more than 5 periods")
+        # Ticks sit on the pool's phase of the period grid (~tick_phase): the stamp is the
+        # tick's wake-up time, so it is the grid point plus the wake-up latency.
+        period = 1.0 / RATE
+        late = sorted((t - self.tick_phase * period) % period for t in stamps)
+        rospy.loginfo("ticks %.3f ms (median) after their phase %.2f of the period",
+                      late[len(late) // 2] * 1e3, self.tick_phase)
+        self.assertLess(late[len(late) // 2], 1e-3, "ticks are not on the ~tick_phase grid")
 
         for m in window:
             # By index (resolved once from the actuator-state order), not by name.
@@ -263,6 +271,7 @@ class PoolTest(unittest.TestCase):
             ({"pool": 9}, "pool"),
             ({"cylinders": ["A_FFJ2_flex"], "ilqg": {"horizon": 0}}, "horizon"),
             ({"cylinders": ["A_FFJ2_flex"], "reference_timout": 1.0}, "reference_timout"),
+            ({"cylinders": ["A_FFJ2_flex"], "tick_phase": 1.5}, "tick_phase"),
         ]
         try:
             for i, (params, field) in enumerate(cases):

@@ -4,10 +4,11 @@
 # simulated robot (MuJoCo + pneumatic plant), the iLQG force-abstraction pools tracking the
 # MPC's planned tendon tensions, and the MPC (iLQG, task catch). Once the MPC runs,
 # demo_report drops the bottle 7 cm above the palm, watches the catch for 3 s, prints what
-# happened (distance to the goal, lowest height, the pools' force tracking, the driver's
-# real-time factor), and the bringup is ended cleanly (driver paused first, so no safety
-# event is raised by the pools going down before it). Exit status: demo_report's (non-zero
-# when the bottle was not caught).
+# happened (distance to the goal, lowest height, the driver's real-time factor), and the
+# bringup is ended cleanly (driver paused first, so no safety event is raised by the pools
+# going down before it). The pools' force tracking is audited against the plant's floor
+# (force_tracking_audit) over a rosbag recorded during the run, log/demo/forces.bag.
+# Exit status: demo_report's (non-zero when the stack did not run sound).
 # Extra arguments go to roslaunch, e.g. `bash scripts/demo.sh rviz:=true planner:=sampling`;
 # `task:=none` runs the earlier finger-wave demo (`duration:=60` sets its report window).
 # Afterwards it renders an image strip of the run offscreen with MuJoCo (render_states under
@@ -51,16 +52,32 @@ trap stop_launch EXIT
 for _ in $(seq 150); do rosparam get /rosversion >/dev/null 2>&1 && break; sleep 0.2; done
 out_dir="$WS_ROOT/log/demo"
 mkdir -p "$out_dir"
-rm -f "$out_dir"/states.csv "$out_dir"/frame_*.ppm
+rm -f "$out_dir"/states.csv "$out_dir"/frame_*.ppm "$out_dir"/forces.bag "$out_dir"/forces.bag.active
 set +e
 scene="$(rosparam get /adroit_sim/scene 2>/dev/null)"
-rosrun adroit_launch demo_report.py "${report_args[@]}" _states_csv:="$out_dir/states.csv"
+# The pools' input and output for the force-tracking audit below (a real rosbag; SIGINT
+# closes it cleanly).
+rosbag record -q -O "$out_dir/forces.bag" /adroit/actuator_states /adroit/force_reference \
+  __name:=demo_force_bag >/dev/null 2>&1 &
+bag_pid=$!
+rosrun adroit_launch demo_report.py "${report_args[@]}" _states_csv:="$out_dir/states.csv" _pause_at_end:=true
 report_status=$?
-set -e
-# Pause first: a paused driver steps no watchdog, so the pools may go down in any order.
+# demo_report paused the driver (this call makes sure): a paused driver steps no watchdog,
+# so the bag's flush and the pools going down in any order cannot trip it.
 rosservice call /adroit/pause true >/dev/null 2>&1 || true
+kill -INT "$bag_pid" 2>/dev/null
+wait "$bag_pid" 2>/dev/null
+set -e
 stop_launch
 trap - EXIT
+
+# The pools' force tracking over the run next to the plant's floor (pneumatic mode only:
+# force mode has no force references).
+if [ -s "$out_dir/forces.bag" ] && [ -n "$scene" ]; then
+  echo
+  rosrun adroit_pneumatics force_tracking_audit --bag "$out_dir/forces.bag" --scene "$scene" \
+    --csv "$out_dir/forces.csv" || echo "demo: no force-tracking audit (no force references recorded)" >&2
+fi
 
 # Six frames over the recorded run, drawn offscreen (a hidden GLFW window on a virtual display).
 if [ -s "$out_dir/states.csv" ] && [ -n "$scene" ]; then

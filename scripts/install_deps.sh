@@ -19,7 +19,7 @@ PACKAGES=(
   libdynamic-reconfigure-config-init-mutex-dev python3-dynamic-reconfigure
   libinteractive-markers-dev libvisualization-msgs-dev
   # ROS command-line programs the scripts, tests and README call by name
-  rosbash python3-roslaunch python3-rosparam python3-rostopic python3-rosservice python3-rosnode
+  rosbash python3-rosbag python3-roslaunch python3-rosparam python3-rostopic python3-rosservice python3-rosnode
   # Python modules imported by the rostests and the Python nodes (ros-desktop-dev brings
   # only the C++ side of the messages)
   python3-rospy python3-rospkg python3-rostest python3-tf2-ros python3-std-msgs

@@ -242,9 +242,7 @@ class TrialRunner {
       for (const auto& c : robot_->cylinders()) {
         pneumatics::CylinderSpec spec = pneumatics::cylinderSpec(c.type);
         spec.dead_volume = pneumatics::deadVolume(c.type, c.bore_diameter);
-        const std::string group = c.name.rfind("A_WR", 0) == 0 ? "wrist" : c.name.rfind("A_AR", 0) == 0 ? "arm"
-                                                                                                      : c.name.substr(2, 2);
-        audited_.push_back({group, spec});
+        audited_.push_back({pneumatics::trackingGroup(c.name), spec});
       }
     }
   }

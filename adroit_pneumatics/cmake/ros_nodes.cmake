@@ -1,5 +1,6 @@
 # ROS layer of adroit_pneumatics: the ROS-free pool library, the pool node and nodelet,
-# the excitation node, the rosbag -> CSV tool for identification, and their tests.
+# the excitation node, the rosbag -> CSV tool for identification, the rosbag force-tracking
+# audit, and their tests.
 # Included at the end of CMakeLists.txt (after catkin_package and the core target).
 
 # ROS-free: CylinderPool, default pool split, model cylinder table (adroit_description's
@@ -33,10 +34,15 @@ target_include_directories(pneumatic_sysid_bag PRIVATE ${catkin_INCLUDE_DIRS})
 target_link_libraries(pneumatic_sysid_bag adroit_pneumatics_pool ${catkin_LIBRARIES})
 add_dependencies(pneumatic_sysid_bag ${catkin_EXPORTED_TARGETS})
 
+add_executable(force_tracking_audit nodes/force_audit_bag.cpp)
+target_include_directories(force_tracking_audit PRIVATE ${catkin_INCLUDE_DIRS})
+target_link_libraries(force_tracking_audit adroit_pneumatics_pool ${catkin_LIBRARIES})
+add_dependencies(force_tracking_audit ${catkin_EXPORTED_TARGETS})
+
 install(TARGETS adroit_pneumatics_pool adroit_pneumatics_nodelets
   ARCHIVE DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
   LIBRARY DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION})
-install(TARGETS pool_node excitation_node pneumatic_sysid_bag
+install(TARGETS pool_node excitation_node pneumatic_sysid_bag force_tracking_audit
   RUNTIME DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
 install(FILES nodelet_plugins.xml DESTINATION ${CATKIN_PACKAGE_SHARE_DESTINATION})
 install(DIRECTORY launch DESTINATION ${CATKIN_PACKAGE_SHARE_DESTINATION})
@@ -50,6 +56,14 @@ if(CATKIN_ENABLE_TESTING)
   # Its own binary: it replaces the global operator new/delete to count allocations.
   catkin_add_gtest(test_pool_realtime test/test_pool_realtime.cpp)
   target_link_libraries(test_pool_realtime adroit_pneumatics_pool GTest::gtest_main)
+
+  # The audit tool end to end on bags written with the rosbag API.
+  catkin_add_gtest(test_force_audit_bag test/test_force_audit_bag.cpp)
+  target_include_directories(test_force_audit_bag PRIVATE ${catkin_INCLUDE_DIRS})
+  target_link_libraries(test_force_audit_bag adroit_pneumatics_pool ${catkin_LIBRARIES} GTest::gtest_main)
+  add_dependencies(test_force_audit_bag force_tracking_audit ${catkin_EXPORTED_TARGETS})
+  target_compile_definitions(test_force_audit_bag PRIVATE ADROIT_DESCRIPTION_SHARE="${adroit_description_DIR}/.."
+                             FORCE_AUDIT_BINARY="$<TARGET_FILE:force_tracking_audit>")
 
   find_package(rostest REQUIRED)
   add_rostest(test/pool.test DEPENDENCIES pool_node)

@@ -100,6 +100,12 @@ double TrackingFloor::holdStep(double p_ref, double dt) {
   return pressure_;
 }
 
+std::string trackingGroup(const std::string& cylinder) {
+  if (cylinder.rfind("A_WR", 0) == 0) return "wrist";
+  if (cylinder.rfind("A_AR", 0) == 0) return "arm";
+  return cylinder.size() >= 4 ? cylinder.substr(2, 2) : cylinder;
+}
+
 ForceTrackingAudit::ForceTrackingAudit(std::vector<Cylinder> cylinders, double limit, double dead_time, double room)
     : cylinders_(std::move(cylinders)), room_(room) {
   for (const Cylinder& c : cylinders_) {

@@ -1,8 +1,6 @@
 #!/usr/bin/python3
 """Watches the running system for ~duration seconds, then prints what it did and exits:
-joint range of motion per finger, force tracking of the pneumatic pools (desired tension
-from /adroit/force_reference against the measured tension in /adroit/actuator_states), and
-the driver's own diagnostics (real-time factor, step time, safety state). With ~states_csv it
+joint range of motion per finger and the driver's own diagnostics (real-time factor, step time, safety state). With ~states_csv it
 also records the robot and object state at ~states_rate Hz into a CSV that render_states draws
 (columns: time, 1-DOF joint names, object_root:x|y|z|qw|qx|qy|qz).
 
@@ -13,14 +11,14 @@ reference has been seen it puts the bottle at the task's goal on the palm
 for ~drop_hold seconds and lets it fall, watches it for ~watch seconds and reports whether it was caught (stayed
 above ~min_height, ended within ~tolerance of the goal); the states are recorded from the
 drop on. Exit status 0 when the stack ran sound: the MPC planned and the driver never entered
-its safe state (watchdog, e-stop, fault). Whether the bottle is caught in real time depends
+its safe state (watchdog, e-stop, fault). ~pause_at_end: pause the driver (/adroit/pause)
+once the report is printed. Whether the bottle is caught in real time depends
 on the planning latency this machine allows; it is printed, and mpc_success measures it."""
 import math
 import sys
-from collections import defaultdict
 
 import rospy
-from adroit_msgs.msg import ActuatorStates, ForceReference, TendonForceCommand, ValveCommand
+from adroit_msgs.msg import ForceReference, TendonForceCommand, ValveCommand
 from adroit_msgs.srv import SetObjectPose, SetObjectPoseRequest
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
@@ -35,9 +33,6 @@ class DemoReport:
         self.duration = float(rospy.get_param("~duration", 20.0))
         self.settle = float(rospy.get_param("~settle", 2.0))  # ignore the start-up transient
         self.joint_min, self.joint_max = {}, {}
-        self.reference = None
-        self.sq_error = defaultdict(float)
-        self.samples = defaultdict(int)
         self.driver_status = {}
         self.start = None
         self.states_csv = rospy.get_param("~states_csv", "")
@@ -47,8 +42,6 @@ class DemoReport:
         self.lowest_z = None    # of the object, while recording the catch
         rospy.Subscriber("/adroit/object/odom", Odometry, self.on_object, queue_size=10)
         rospy.Subscriber("/adroit/joint_states", JointState, self.on_joints, queue_size=50)
-        rospy.Subscriber("/adroit/force_reference", ForceReference, self.on_reference, queue_size=5)
-        rospy.Subscriber("/adroit/actuator_states", ActuatorStates, self.on_actuators, queue_size=50)
         rospy.Subscriber("/adroit/diagnostics", DiagnosticArray, self.on_diagnostics, queue_size=10)
 
     def measuring(self, stamp):
@@ -95,33 +88,6 @@ class DemoReport:
             self.joint_min[name] = min(q, self.joint_min.get(name, q))
             self.joint_max[name] = max(q, self.joint_max.get(name, q))
 
-    def on_reference(self, msg):
-        self.reference = msg
-
-    def desired(self, name, stamp):
-        ref = self.reference
-        if ref is None or name not in ref.name:
-            return None
-        k = (stamp - ref.header.stamp).to_sec() / ref.dt
-        if k < 0 or k > ref.steps - 1:
-            return None
-        j, n = ref.name.index(name), len(ref.name)
-        k0 = int(math.floor(k))
-        k1 = min(k0 + 1, ref.steps - 1)
-        a = k - k0
-        return (1 - a) * ref.force[k0 * n + j] + a * ref.force[k1 * n + j]
-
-    def on_actuators(self, msg):
-        if not self.measuring(msg.header.stamp):
-            return
-        for name, force in zip(msg.name, msg.force):
-            want = self.desired(name, msg.header.stamp)
-            if want is None:
-                continue
-            group = "arm" if name.startswith("A_AR") else "wrist" if name.startswith("A_WR") else name[2:4].lower()
-            self.sq_error[group] += (force - want) ** 2
-            self.samples[group] += 1
-
     def on_diagnostics(self, msg):
         for status in msg.status:
             if status.name == "adroit_sim":
@@ -135,11 +101,6 @@ class DemoReport:
             if names:
                 spans = ", ".join(f"{n} {math.degrees(self.joint_max[n] - self.joint_min[n]):.0f}" for n in names)
                 print(f"  {finger}: {spans}")
-        if self.samples:
-            print("pneumatic force tracking, RMSE of measured vs desired tendon tension [N]:")
-            for group in sorted(self.samples):
-                rmse = math.sqrt(self.sq_error[group] / self.samples[group])
-                print(f"  {group:6s} {rmse:6.2f}   ({self.samples[group]} samples)")
         if self.driver_status:
             keys = [k for k in ("real_time_factor", "step_time", "safe_state", "rejected_total", "watchdog_latched")
                     if k in self.driver_status]
@@ -245,6 +206,14 @@ if __name__ == "__main__":
         rospy.sleep(node.duration)
         moved = node.report()
         ok = moved > 0
+    if rospy.get_param("~pause_at_end", False):
+        # Stop the simulation from this node, already up, rather than from a new process
+        # whose start-up load on the two cores once delayed the pools' commands past the
+        # driver's watchdog after the report.
+        try:
+            rospy.ServiceProxy("/adroit/pause", SetBool)(True)
+        except (rospy.ServiceException, rospy.ROSException) as e:
+            print(f"demo_report: could not pause the driver: {e}", file=sys.stderr)
     node.write_states()
     rospy.signal_shutdown("demo finished")
     sys.exit(0 if ok else 1)

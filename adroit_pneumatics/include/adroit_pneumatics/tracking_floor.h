@@ -51,6 +51,10 @@ class TrackingFloor {
   double pressure_;
 };
 
+// The group a cylinder's tracking is reported in: "wrist" (A_WR*), "arm" (A_AR*), else the
+// finger of its name (A_FFJ2_flex -> "FF").
+std::string trackingGroup(const std::string& cylinder);
+
 // Force tracking of cylinders against their references, per group (e.g. per finger), next
 // to two floors: TrackingFloor stopping exactly, and holding one command per sample (the
 // ideal controller at the sampling rate, e.g. a pool's 200 Hz tick).

@@ -1,0 +1,202 @@
+// force_tracking_audit: the pools' force tracking in a recorded run, next to the plant's
+// floor (ForceTrackingAudit, tracking_floor.h), per group of cylinders.
+//   force_tracking_audit --bag run.bag [--model scene.xml | --scene arm_hand] [--limit 2.0]
+//                        [--csv out.csv]
+// The bag holds /adroit/actuator_states and /adroit/force_reference (e.g. `rosbag record`
+// beside a bringup; scripts/demo.sh records one). At every actuator state after the first
+// reference, the desired tension of each cylinder is the newest reference interpolated at
+// the state's stamp, as the pools take it; states outside that reference's span are
+// skipped. The floors start from the first audited state's pressures and follow each
+// cylinder's recorded piston travel and supply; --limit is the pools' command limit (V,
+// config/pools.yaml ilqg/u_max). --csv writes time, desired and measured tension per
+// cylinder.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <exception>
+#include <fstream>
+#include <map>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include <ros/package.h>
+#include <rosbag/bag.h>
+#include <rosbag/view.h>
+
+#include <adroit_msgs/ActuatorStates.h>
+#include <adroit_msgs/ForceReference.h>
+
+#include "adroit_description/scenes.h"
+#include "adroit_pneumatics/plant.h"
+#include "adroit_pneumatics/pool.h"
+#include "adroit_pneumatics/tracking_floor.h"
+
+using namespace adroit::pneumatics;
+
+namespace {
+
+constexpr const char* kUsage =
+    "usage: force_tracking_audit --bag run.bag [--model f.xml | --scene arm_hand] [--limit 2.0] [--csv out.csv]\n";
+
+// The reference's value for column j at time t (linear between samples), NaN outside it.
+double desiredAt(const adroit_msgs::ForceReference& ref, std::size_t j, double t) {
+  const std::size_t n = ref.name.size();
+  const double x = (t - ref.header.stamp.toSec()) / ref.dt;
+  if (!(x >= 0) || x > static_cast<double>(ref.steps - 1)) return std::nan("");
+  const auto k0 = static_cast<std::size_t>(x);
+  const std::size_t k1 = std::min<std::size_t>(k0 + 1, ref.steps - 1);
+  const double a = x - static_cast<double>(k0);
+  return (1 - a) * ref.force[k0 * n + j] + a * ref.force[k1 * n + j];
+}
+
+// A reference the audit can use: a stamp, positive dt, steps x names forces.
+bool usable(const adroit_msgs::ForceReference& ref) {
+  return !ref.header.stamp.isZero() && ref.dt > 0 && std::isfinite(ref.dt) && ref.steps > 0 &&
+         ref.force.size() == static_cast<std::size_t>(ref.steps) * ref.name.size();
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string bag_path, model_file, scene = "arm_hand", csv_path;
+  double limit = 2.0;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (i + 1 >= argc) {
+      std::fprintf(stderr, "force_tracking_audit: %s needs a value\n%s", a.c_str(), kUsage);
+      return 2;
+    }
+    const std::string v = argv[++i];
+    if (a == "--bag") bag_path = v;
+    else if (a == "--model") model_file = v;
+    else if (a == "--scene") scene = v;
+    else if (a == "--csv") csv_path = v;
+    else if (a == "--limit") limit = std::atof(v.c_str());
+    else {
+      std::fprintf(stderr, "force_tracking_audit: unknown argument %s\n%s", a.c_str(), kUsage);
+      return 2;
+    }
+  }
+  if (bag_path.empty() || !(limit > 0)) {
+    std::fprintf(stderr, "%s", kUsage);
+    return 2;
+  }
+  try {
+    if (model_file.empty())
+      model_file = adroit::description::sceneFile(ros::package::getPath("adroit_description"), scene);
+    const auto table = loadModelCylinders(model_file);
+
+    rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
+    rosbag::View view(bag, rosbag::TopicQuery(std::vector<std::string>{"/adroit/actuator_states",
+                                                                       "/adroit/force_reference"}));
+    adroit_msgs::ForceReference::ConstPtr ref;
+    std::vector<std::string> names;         // audited cylinders: the first reference's that the model has
+    std::vector<std::size_t> in_reference;  // their columns in the reference (resolved per reference)
+    std::vector<double> volume_area, dead;  // per audited cylinder
+    std::unique_ptr<ForceTrackingAudit> audit;
+    std::vector<double> desired, tension, volume, volume_rate, pressure;
+    std::ofstream csv;
+    double last_t = 0;
+    std::size_t states = 0, audited = 0, skipped = 0, references = 0, bad_references = 0;
+    for (const rosbag::MessageInstance& m : view) {
+      if (auto r = m.instantiate<adroit_msgs::ForceReference>()) {
+        if (!usable(*r)) {
+          ++bad_references;
+          continue;
+        }
+        ++references;
+        ref = r;
+        if (audit) continue;
+        std::vector<ForceTrackingAudit::Cylinder> cylinders;
+        for (const std::string& n : r->name) {
+          const auto c = std::find_if(table.begin(), table.end(), [&](const auto& x) { return x.name == n; });
+          if (c == table.end()) continue;
+          CylinderSpec spec = cylinderSpec(c->type);
+          spec.dead_volume = deadVolume(c->type, c->bore_diameter);
+          spec.bore_area = c->bore_area;
+          cylinders.push_back({trackingGroup(n), spec});
+          names.push_back(n);
+          volume_area.push_back(c->bore_area);
+          dead.push_back(spec.dead_volume);
+        }
+        if (names.empty()) throw std::runtime_error("the first force reference names no cylinder of " + model_file);
+        audit = std::make_unique<ForceTrackingAudit>(std::move(cylinders), limit, PlantOptions{}.tube_delay);
+        if (!csv_path.empty()) {
+          csv.open(csv_path);
+          if (!csv) throw std::runtime_error("--csv: cannot write " + csv_path);
+          csv << "time";
+          for (const auto& n : names) csv << ',' << n << ":desired";
+          for (const auto& n : names) csv << ',' << n << ":measured";
+          csv << '\n';
+        }
+        continue;
+      }
+      auto s = m.instantiate<adroit_msgs::ActuatorStates>();
+      if (!s) continue;
+      ++states;
+      if (!audit || !ref) continue;
+      const std::size_t n = s->name.size();
+      if (s->pressure.size() != n || s->length.size() != n || s->length_rate.size() != n || s->force.size() != n ||
+          !std::isfinite(s->supply_pressure) || s->header.stamp.isZero()) {
+        ++skipped;
+        continue;
+      }
+      const double t = s->header.stamp.toSec();
+      const std::size_t k = names.size();
+      desired.assign(k, std::nan(""));
+      tension.assign(k, std::nan(""));
+      volume.assign(k, 0.0);
+      volume_rate.assign(k, 0.0);
+      pressure.assign(k, std::nan(""));
+      bool complete = true;
+      for (std::size_t j = 0; j < k && complete; ++j) {
+        const auto col = std::find(ref->name.begin(), ref->name.end(), names[j]) - ref->name.begin();
+        const auto row = std::find(s->name.begin(), s->name.end(), names[j]) - s->name.begin();
+        if (col == static_cast<long>(ref->name.size()) || row == static_cast<long>(n)) {
+          complete = false;
+          break;
+        }
+        desired[j] = desiredAt(*ref, static_cast<std::size_t>(col), t);
+        tension[j] = s->force[row];
+        pressure[j] = s->pressure[row];
+        volume[j] = dead[j] + volume_area[j] * std::max(0.0, s->length[row]);
+        volume_rate[j] = volume_area[j] * s->length_rate[row];
+        complete = std::isfinite(desired[j]) && std::isfinite(tension[j]) && std::isfinite(volume[j]) &&
+                   std::isfinite(volume_rate[j]);
+      }
+      if (!complete) {
+        ++skipped;
+        continue;
+      }
+      if (audited == 0) audit->start(pressure);
+      else audit->add(t - last_t, desired, tension, volume, volume_rate, s->supply_pressure);
+      last_t = t;
+      ++audited;
+      if (csv.is_open()) {
+        csv << t;
+        for (double v : desired) csv << ',' << v;
+        for (double v : tension) csv << ',' << v;
+        csv << '\n';
+      }
+    }
+    if (!audit || audited < 2)
+      throw std::runtime_error(bag_path + ": no actuator state inside a force reference (" + std::to_string(states) +
+                               " states, " + std::to_string(references) + " references)");
+    std::printf("force tracking in %s: %zu actuator states audited (%zu skipped), %zu references (%zu unusable)\n",
+                bag_path.c_str(), audited, skipped, references, bad_references);
+    std::printf("measured vs desired tendon tension, RMSE in N, next to the plant's floor: a cylinder racing at the\n"
+                "command limit (+-%.1f V) to each new desired value after the plant's %.0f ms tube delay and stopping\n"
+                "on it exactly, and per sample: one command per state sample, chosen with an exact model\n",
+                limit, PlantOptions{}.tube_delay * 1e3);
+    std::printf("  %-6s %7s %7s %10s %10s %8s\n", "group", "RMSE", "floor", "per sample", "RMSE/floor", "max ref");
+    for (const auto& [group, g] : audit->groups())
+      std::printf("  %-6s %7.2f %7.2f %10.2f %10.2f %8.1f\n", group.c_str(), g.rmse, g.floor, g.per_tick,
+                  g.per_tick > 0 ? g.rmse / g.per_tick : 0.0, g.max_reference);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "force_tracking_audit: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

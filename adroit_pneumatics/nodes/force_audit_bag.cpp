@@ -8,8 +8,8 @@
 // the state's stamp, as the pools take it; states outside that reference's span are
 // skipped. The floors start from the first audited state's pressures and follow each
 // cylinder's recorded piston travel and supply; --limit is the pools' command limit (V,
-// config/pools.yaml ilqg/u_max). --csv writes time, desired and measured tension per
-// cylinder.
+// config/pools.yaml ilqg/u_max). --csv writes time, desired and measured tension and the
+// per-sample floor's tension per cylinder.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -57,6 +57,35 @@ bool usable(const adroit_msgs::ForceReference& ref) {
          ref.force.size() == static_cast<std::size_t>(ref.steps) * ref.name.size();
 }
 
+constexpr int kMaxShift = 50;  // samples
+
+// The shift (in samples, interpolated) by which the floor's trace must lag the desired one to
+// reach the RMSE `target` over the group's cylinders: the measured excess over the floor
+// expressed as a delay. NaN when even kMaxShift samples are not enough.
+double latencyEquivalent(const std::vector<std::vector<double>>& desired, const std::vector<std::vector<double>>& floor,
+                         const std::vector<std::size_t>& members, double target) {
+  const auto rmse = [&](int shift) {
+    double sq = 0;
+    long n = 0;
+    for (std::size_t k = 0; k < desired.size(); ++k) {
+      const std::size_t from = k >= static_cast<std::size_t>(shift) ? k - shift : 0;
+      for (std::size_t j : members) {
+        const double e = floor[from][j] - desired[k][j];
+        if (std::isfinite(e)) sq += e * e, ++n;
+      }
+    }
+    return n > 0 ? std::sqrt(sq / n) : 0.0;
+  };
+  double previous = rmse(0);
+  if (previous >= target) return 0.0;
+  for (int shift = 1; shift <= kMaxShift; ++shift) {
+    const double now = rmse(shift);
+    if (now >= target) return shift - 1 + (target - previous) / std::max(now - previous, 1e-12);
+    previous = now;
+  }
+  return std::nan("");
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -98,6 +127,10 @@ int main(int argc, char** argv) {
     std::unique_ptr<ForceTrackingAudit> audit;
     std::vector<double> desired, tension, volume, volume_rate, pressure;
     std::ofstream csv;
+    // Per audited sample (after the first): its time, desired and per-sample floor tensions,
+    // for the latency equivalent of the excess below.
+    std::vector<double> times;
+    std::vector<std::vector<double>> desired_log, floor_log;
     double last_t = 0;
     std::size_t states = 0, audited = 0, skipped = 0, references = 0, bad_references = 0;
     for (const rosbag::MessageInstance& m : view) {
@@ -129,6 +162,7 @@ int main(int argc, char** argv) {
           csv << "time";
           for (const auto& n : names) csv << ',' << n << ":desired";
           for (const auto& n : names) csv << ',' << n << ":measured";
+          for (const auto& n : names) csv << ',' << n << ":floor_per_sample";
           csv << '\n';
         }
         continue;
@@ -171,13 +205,20 @@ int main(int argc, char** argv) {
         continue;
       }
       if (audited == 0) audit->start(pressure);
-      else audit->add(t - last_t, desired, tension, volume, volume_rate, s->supply_pressure);
+      else {
+        audit->add(t - last_t, desired, tension, volume, volume_rate, s->supply_pressure);
+        times.push_back(t);
+        desired_log.push_back(desired);
+        floor_log.push_back(audit->lastPerTickTension());
+      }
       last_t = t;
       ++audited;
       if (csv.is_open()) {
         csv << t;
         for (double v : desired) csv << ',' << v;
         for (double v : tension) csv << ',' << v;
+        for (std::size_t j = 0; j < k; ++j)
+          csv << ',' << (audited > 1 ? audit->lastPerTickTension()[j] : tension[j]);
         csv << '\n';
       }
     }
@@ -190,10 +231,22 @@ int main(int argc, char** argv) {
                 "command limit (+-%.1f V) to each new desired value after the plant's %.0f ms tube delay and stopping\n"
                 "on it exactly, and per sample: one command per state sample, chosen with an exact model\n",
                 limit, PlantOptions{}.tube_delay * 1e3);
-    std::printf("  %-6s %7s %7s %10s %10s %8s\n", "group", "RMSE", "floor", "per sample", "RMSE/floor", "max ref");
-    for (const auto& [group, g] : audit->groups())
-      std::printf("  %-6s %7.2f %7.2f %10.2f %10.2f %8.1f\n", group.c_str(), g.rmse, g.floor, g.per_tick,
-                  g.per_tick > 0 ? g.rmse / g.per_tick : 0.0, g.max_reference);
+    std::printf("  %-6s %7s %7s %10s %10s %8s %9s\n", "group", "RMSE", "floor", "per sample", "RMSE/floor", "max ref",
+                "as delay");
+    const double spacing = times.size() > 1 ? (times.back() - times.front()) / static_cast<double>(times.size() - 1) : 0;
+    for (const auto& [group, g] : audit->groups()) {
+      std::vector<std::size_t> members;
+      for (std::size_t j = 0; j < names.size(); ++j)
+        if (trackingGroup(names[j]) == group) members.push_back(j);
+      const double delay = latencyEquivalent(desired_log, floor_log, members, g.rmse);
+      char as_delay[32];
+      if (std::isfinite(delay)) std::snprintf(as_delay, sizeof as_delay, "%.1f ms", delay * spacing * 1e3);
+      else std::snprintf(as_delay, sizeof as_delay, "> %d ms", static_cast<int>(kMaxShift * spacing * 1e3));
+      std::printf("  %-6s %7.2f %7.2f %10.2f %10.2f %8.1f %9s\n", group.c_str(), g.rmse, g.floor, g.per_tick,
+                  g.per_tick > 0 ? g.rmse / g.per_tick : 0.0, g.max_reference, as_delay);
+    }
+    std::printf("(as delay: how late the per-sample floor would have to act to be as far off as the measured\n"
+                "tension: its trace shifted by that much against the desired one has the measured RMSE)\n");
   } catch (const std::exception& e) {
     std::fprintf(stderr, "force_tracking_audit: %s\n", e.what());
     return 1;

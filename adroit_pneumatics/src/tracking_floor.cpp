@@ -129,6 +129,7 @@ void ForceTrackingAudit::add(double dt, const std::vector<double>& reference, co
                              double supply) {
   const std::size_t n = std::min({cylinders_.size(), reference.size(), tension.size(), volume.size(),
                                   volume_rate.size()});
+  last_tick_tension_.assign(cylinders_.size(), std::nan(""));
   for (std::size_t j = 0; j < n; ++j) {
     if (!std::isfinite(reference[j]) || !std::isfinite(tension[j])) continue;
     const double area = cylinders_[j].spec.bore_area, want = std::max(0.0, reference[j]);
@@ -137,6 +138,7 @@ void ForceTrackingAudit::add(double dt, const std::vector<double>& reference, co
     const auto pull = [&](double p) { return std::max(0.0, (p - room_) * area); };
     const double floor = pull(floors_[j].step(p_ref, dt, volume[j], volume_rate[j], supply));
     const double tick = pull(ticks_[j].step(p_ref, dt, volume[j], volume_rate[j], supply));
+    last_tick_tension_[j] = tick;
     Sums& s = sums_[cylinders_[j].group];
     s.error += (tension[j] - want) * (tension[j] - want);
     s.floor += (floor - want) * (floor - want);

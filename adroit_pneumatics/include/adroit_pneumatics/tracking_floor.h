@@ -80,6 +80,8 @@ class ForceTrackingAudit {
   void add(double dt, const std::vector<double>& reference, const std::vector<double>& tension,
            const std::vector<double>& volume, const std::vector<double>& volume_rate, double supply);
   std::map<std::string, Group> groups() const;
+  // Tension (N) of each cylinder's per-tick floor after the last add(), for traces.
+  const std::vector<double>& lastPerTickTension() const { return last_tick_tension_; }
 
  private:
   struct Sums {
@@ -89,6 +91,7 @@ class ForceTrackingAudit {
   std::vector<Cylinder> cylinders_;
   double room_;
   std::vector<TrackingFloor> floors_, ticks_;
+  std::vector<double> last_tick_tension_;
   std::map<std::string, Sums> sums_;
 };
 

@@ -63,7 +63,7 @@ void forwardMarginals(const LgDynamics& dyn, const LgController& c, TrajectoryMa
   }
   Eigen::VectorXd mu = dyn.x0_mean;
   Eigen::MatrixXd sigma = dyn.x0_cov;
-  Eigen::MatrixXd KS(nu, nx), G(nx, nx), FuC(nx, nu);
+  Eigen::MatrixXd KS(nu, nx), G(nx, nx), GS(nx, nx), FuC(nx, nu), next(nx, nx);
   for (int t = 0; t < T; ++t) {
     const Eigen::MatrixXd& K = c.K[t];
     Eigen::VectorXd& m = out.xu_mean[t];
@@ -85,8 +85,9 @@ void forwardMarginals(const LgDynamics& dyn, const LgController& c, TrajectoryMa
     G = dyn.Fx[t];
     G.noalias() += dyn.Fu[t] * K;
     FuC.noalias() = dyn.Fu[t] * c.covariance(t);
-    Eigen::MatrixXd next = dyn.Sigma[t];
-    next.noalias() += G * S.topLeftCorner(nx, nx) * G.transpose();
+    GS.noalias() = G * sigma;
+    next = dyn.Sigma[t];
+    next.noalias() += GS * G.transpose();
     next.noalias() += FuC * dyn.Fu[t].transpose();
     sigma = 0.5 * (next + next.transpose());
   }

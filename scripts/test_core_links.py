@@ -155,7 +155,8 @@ def test_core_library_links_no_ros_library(library):
 
 def test_the_main_core_libraries_are_checked():
     names = {os.path.basename(p) for p in INSTALLED}
-    for name in ("libadroit_core.so", "libadroit_description.so", "libadroit_pneumatics_core.so"):
+    for name in ("libadroit_core.so", "libadroit_description.so", "libadroit_pneumatics_core.so",
+                 "libadroit_learning_core.so"):
         assert name in names, f"{name} not found under {INSTALL_BASE}"
 
 

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Sanitizer stage of scripts/test.sh: builds the packages that hold the ROS-free core
-# libraries (adroit_core, adroit_description, adroit_pneumatics, adroit_driver, and what they
-# need) with AddressSanitizer + UndefinedBehaviorSanitizer (LeakSanitizer included) into
-# build-asan/ and install-asan/, then runs their gtest unit tests (not the rostests) there.
+# libraries (adroit_core, adroit_description, adroit_pneumatics, adroit_driver,
+# adroit_learning, and what they need) with AddressSanitizer + UndefinedBehaviorSanitizer
+# (LeakSanitizer included) into build-asan/ and install-asan/, then runs their gtest unit
+# tests (not the rostests) there.
 # Any sanitizer report fails the test binary: ASan and LSan stop at the first report
 # (halt_on_error) with a non-zero exit code, UBSan cannot recover
 # (-fno-sanitize-recover=undefined). The results land in build-asan/*/test_results, which
@@ -14,7 +15,7 @@ cd "$WS_ROOT" || exit 1
 
 BUILD_BASE=build-asan  # test.sh counts its results beside build/'s
 INSTALL_BASE=install-asan
-PACKAGES=(adroit_core adroit_description adroit_pneumatics adroit_driver)
+PACKAGES=(adroit_core adroit_description adroit_pneumatics adroit_driver adroit_learning)
 
 # No result of an earlier run may count if this build fails.
 rm -rf "$BUILD_BASE"/*/test_results "$BUILD_BASE"/*/Testing/Temporary/LastTestsFailed*.log

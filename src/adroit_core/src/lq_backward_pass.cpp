@@ -72,6 +72,7 @@ BackwardPass::BackwardPass(int nx, int nu, int horizon, BackwardPassSettings set
       llt_(nu),
       Vx_(horizon + 1, Eigen::VectorXd::Zero(nx)),
       Vxx_(horizon + 1, Eigen::MatrixXd::Zero(nx, nx)),
+      Quu_steps_(horizon, Eigen::MatrixXd::Zero(nu, nu)),
       Qx_(nx),
       Qu_(nu),
       lower_(nu),
@@ -158,6 +159,7 @@ BackwardPassResult BackwardPass::run(const LqApproximation& lq, const std::vecto
     Quu_.noalias() += B.transpose() * VxxB_;
     Qux_ = lq.lux[t];
     Qux_.noalias() += B.transpose() * VxxA_;
+    Quu_steps_[t] = Quu_;
 
     // Regularised copies decide the step; the value update below uses the exact Q terms.
     Quu_reg_ = Quu_;

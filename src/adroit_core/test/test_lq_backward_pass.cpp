@@ -201,6 +201,7 @@ TEST(BackwardPass, GainsAndValueEqualTheTextbookRiccatiRecursion) {
     const MatrixXd S_inv = S.inverse();
     EXPECT_LT(relativeError(gains.K[t], -S_inv * L), 1e-8) << "t " << t;
     EXPECT_LT(relativeError(gains.k[t], -S_inv * m), 1e-8) << "t " << t;
+    EXPECT_LT(relativeError(pass.Quu(t), S), 1e-8) << "t " << t;
     const MatrixXd P_next = lq.lxx[t] + A.transpose() * P * A - L.transpose() * S_inv * L;
     const VectorXd s_next = lq.lx[t] + A.transpose() * s - L.transpose() * S_inv * m;
     P = P_next;
@@ -297,6 +298,7 @@ TEST(BackwardPass, RegularisationEntersAsDeclared) {
     const MatrixXd Qxx = lq.lxx[t] + A.transpose() * P * A;
     const MatrixXd Vxx = Qxx + K.transpose() * Quu * K + K.transpose() * Qux + Qux.transpose() * K;
     EXPECT_LT(relativeError(pass.Vxx(t), Vxx), 1e-10);
+    EXPECT_LT(relativeError(pass.Quu(t), Quu), 1e-10);  // the exact one, without mu
   }
 }
 

@@ -70,6 +70,10 @@ class BackwardPass {
   // V(x) ~ Vx' dx + 0.5 dx' Vxx dx.
   const Eigen::VectorXd& Vx(int t) const { return Vx_[t]; }
   const Eigen::MatrixXd& Vxx(int t) const { return Vxx_[t]; }
+  // Unregularised Q_uu of the last run at step t (t = 0..T-1; valid for the steps the run
+  // reached, i.e. all when it returned ok). The maximum-entropy controller's covariance is its
+  // inverse (thesis 8.2.1: C_t = Quu_t^-1).
+  const Eigen::MatrixXd& Quu(int t) const { return Quu_steps_[t]; }
 
  private:
   void checkInputs(const LqApproximation& lq, const std::vector<Eigen::VectorXd>& u_nominal,
@@ -81,6 +85,7 @@ class BackwardPass {
   Eigen::LLT<Eigen::MatrixXd> llt_;  // unconstrained steps: always nu x nu, compute() reuses storage
   std::vector<Eigen::VectorXd> Vx_;
   std::vector<Eigen::MatrixXd> Vxx_;
+  std::vector<Eigen::MatrixXd> Quu_steps_;  // horizon entries, nu x nu
   Eigen::VectorXd Qx_, Qu_, lower_, upper_, du_;
   Eigen::MatrixXd Quu_, Qux_, Quu_reg_, Qux_reg_, VxxA_, VxxB_, QuuK_;
 };

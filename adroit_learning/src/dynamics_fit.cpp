@@ -1,0 +1,221 @@
+#include "adroit_learning/dynamics_fit.h"
+
+#include <adroit_core/normal_noise.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+namespace adroit {
+
+namespace {
+
+constexpr double kLog2Pi = 1.8378770664093453;
+
+// Sample mean and maximum-likelihood covariance of the columns.
+void moments(const Eigen::MatrixXd& points, Eigen::VectorXd& mean, Eigen::MatrixXd& cov) {
+  const double n = static_cast<double>(points.cols());
+  mean = points.rowwise().mean();
+  const Eigen::MatrixXd centred = points.colwise() - mean;
+  cov.noalias() = centred * centred.transpose() / n;
+}
+
+}  // namespace
+
+Eigen::MatrixXd transitionPoints(const std::vector<Rollout>& rollouts) {
+  if (rollouts.empty()) throw std::invalid_argument("transitionPoints: no rollouts");
+  const Eigen::Index nx = rollouts[0].x.rows(), nu = rollouts[0].u.rows();
+  Eigen::Index count = 0;
+  for (const Rollout& r : rollouts) {
+    if (r.x.rows() != nx || r.u.rows() != nu || r.x.cols() != r.u.cols() + 1)
+      throw std::invalid_argument("transitionPoints: rollouts must all be nx x (T+1) and nu x T");
+    count += r.u.cols();
+  }
+  Eigen::MatrixXd z(2 * nx + nu, count);
+  Eigen::Index c = 0;
+  for (const Rollout& r : rollouts)
+    for (Eigen::Index t = 0; t < r.u.cols(); ++t, ++c) z.col(c) << r.x.col(t), r.u.col(t), r.x.col(t + 1);
+  return z;
+}
+
+Eigen::MatrixXd Gmm::logJoint(const Eigen::MatrixXd& points) const {
+  const int K = clusters();
+  Eigen::MatrixXd out(K, points.cols());
+  Eigen::LLT<Eigen::MatrixXd> llt;
+  for (int k = 0; k < K; ++k) {
+    llt.compute(covariances[k]);
+    if (llt.info() != Eigen::Success) throw std::runtime_error("Gmm: a covariance is not positive definite");
+    const double log_det = 2.0 * llt.matrixL().toDenseMatrix().diagonal().array().log().sum();
+    Eigen::MatrixXd y = points.colwise() - means[k];
+    llt.matrixL().solveInPlace(y);
+    const double log_w = weights[k] > 0 ? std::log(weights[k]) : -std::numeric_limits<double>::infinity();
+    out.row(k) = (-0.5 * (y.colwise().squaredNorm().array() + log_det + points.rows() * kLog2Pi) + log_w).matrix();
+  }
+  return out;
+}
+
+Eigen::VectorXd Gmm::logDensity(const Eigen::MatrixXd& points) const {
+  const Eigen::MatrixXd lj = logJoint(points);
+  Eigen::VectorXd out(points.cols());
+  for (Eigen::Index i = 0; i < lj.cols(); ++i) {
+    const double m = lj.col(i).maxCoeff();
+    out[i] = m + std::log((lj.col(i).array() - m).exp().sum());
+  }
+  return out;
+}
+
+Eigen::MatrixXd Gmm::responsibilities(const Eigen::MatrixXd& points) const {
+  Eigen::MatrixXd lj = logJoint(points);
+  for (Eigen::Index i = 0; i < lj.cols(); ++i) {
+    const double m = lj.col(i).maxCoeff();
+    lj.col(i) = (lj.col(i).array() - m).exp().matrix();
+    lj.col(i) /= lj.col(i).sum();
+  }
+  return lj;
+}
+
+double Gmm::penalisedLogLikelihood(const Eigen::MatrixXd& points, double regularization) const {
+  double penalty = 0;
+  for (const Eigen::MatrixXd& S : covariances)
+    penalty += S.llt().solve(Eigen::MatrixXd::Identity(S.rows(), S.cols())).trace();
+  return logDensity(points).sum() - 0.5 * regularization * penalty;
+}
+
+void Gmm::fit(const Eigen::MatrixXd& points, const GmmSettings& s, std::vector<double>* history) {
+  if (points.cols() == 0 || points.rows() == 0) throw std::invalid_argument("Gmm::fit: no points");
+  if (s.clusters < 1 || s.restarts < 1) throw std::invalid_argument("Gmm::fit: clusters and restarts must be >= 1");
+  if (!(s.regularization > 0)) throw std::invalid_argument("Gmm::fit: regularization must be positive");
+  if (!points.allFinite()) throw std::invalid_argument("Gmm::fit: points must be finite");
+  // EM finds a local optimum of its start: keep the best of several starts.
+  Gmm best;
+  std::vector<double> best_history, run_history;
+  double best_objective = -std::numeric_limits<double>::infinity();
+  for (int r = 0; r < s.restarts; ++r) {
+    const double objective = fitOnce(points, s, s.seed + static_cast<std::uint64_t>(r), run_history);
+    if (r == 0 || objective > best_objective) {
+      best_objective = objective;
+      best = *this;
+      best_history.swap(run_history);
+    }
+  }
+  *this = std::move(best);
+  if (history) *history = std::move(best_history);
+}
+
+double Gmm::fitOnce(const Eigen::MatrixXd& points, const GmmSettings& s, std::uint64_t seed,
+                    std::vector<double>& history) {
+  const Eigen::Index n = points.cols(), d = points.rows();
+  const int K = s.clusters;
+  const Eigen::MatrixXd ridge = s.regularization * Eigen::MatrixXd::Identity(d, d);
+
+  // M-step for responsibilities r (clusters x points).
+  const auto maximise = [&](const Eigen::MatrixXd& r) {
+    for (int k = 0; k < K; ++k) {
+      const double nk = std::max(r.row(k).sum(), 1e-12);
+      weights[k] = r.row(k).sum() / static_cast<double>(n);
+      means[k] = points * r.row(k).transpose() / nk;
+      const Eigen::MatrixXd centred = points.colwise() - means[k];
+      covariances[k].noalias() = centred * r.row(k).asDiagonal() * centred.transpose();
+      covariances[k] += ridge;
+      covariances[k] /= nk;
+    }
+  };
+
+  // Start: seeds by D^2 sampling (k-means++: each next seed is a point drawn with probability
+  // proportional to its squared distance to the nearest seed so far), every point assigned to
+  // its nearest seed, and one M-step on that hard assignment. (Starting every cluster at the
+  // overall covariance instead lets EM drift into merged clusters.)
+  weights.assign(K, 1.0 / K);
+  means.assign(K, Eigen::VectorXd::Zero(d));
+  covariances.assign(K, Eigen::MatrixXd::Identity(d, d));
+  NormalNoise rng(seed);
+  Eigen::VectorXd nearest = Eigen::VectorXd::Constant(n, std::numeric_limits<double>::infinity());
+  Eigen::VectorXi owner = Eigen::VectorXi::Zero(n);
+  Eigen::Index pick = std::min<Eigen::Index>(static_cast<Eigen::Index>(rng.uniform() * n), n - 1);
+  for (int k = 0; k < K; ++k) {
+    means[k] = points.col(pick);
+    const Eigen::VectorXd dist = (points.colwise() - means[k]).colwise().squaredNorm().transpose();
+    for (Eigen::Index i = 0; i < n; ++i)
+      if (dist[i] < nearest[i]) {
+        nearest[i] = dist[i];
+        owner[i] = k;
+      }
+    const double total = nearest.sum();
+    if (!(total > 0)) continue;  // fewer distinct points than clusters: keep the last pick
+    double target = rng.uniform() * total;
+    for (pick = 0; pick < n - 1 && target >= nearest[pick]; ++pick) target -= nearest[pick];
+  }
+  Eigen::MatrixXd hard = Eigen::MatrixXd::Zero(K, n);
+  for (Eigen::Index i = 0; i < n; ++i) hard(owner[i], i) = 1.0;
+  maximise(hard);
+
+  history.assign(1, penalisedLogLikelihood(points, s.regularization));
+  for (int it = 0; it < s.max_iterations; ++it) {
+    maximise(responsibilities(points));  // E-step, M-step
+    history.push_back(penalisedLogLikelihood(points, s.regularization));
+    if (history.back() - history[history.size() - 2] < s.tolerance * static_cast<double>(n)) break;
+  }
+  return history.back();
+}
+
+LgDynamics fitDynamics(const std::vector<Rollout>& rollouts, const Gmm* prior, const DynamicsFitSettings& s) {
+  if (rollouts.empty()) throw std::invalid_argument("fitDynamics: no rollouts");
+  const int nx = static_cast<int>(rollouts[0].x.rows()), nu = static_cast<int>(rollouts[0].u.rows());
+  const int T = static_cast<int>(rollouts[0].u.cols());
+  const int nxu = nx + nu, d = 2 * nx + nu;
+  for (const Rollout& r : rollouts)
+    if (r.x.rows() != nx || r.u.rows() != nu || r.u.cols() != T || r.x.cols() != T + 1 || !r.x.allFinite() ||
+        !r.u.allFinite())
+      throw std::invalid_argument("fitDynamics: rollouts must be finite, nx x (T+1) and nu x T, all the same");
+  if (prior && (prior->clusters() == 0 || prior->means[0].size() != d))
+    throw std::invalid_argument("fitDynamics: the prior is not over (x, u, x') of dimension " + std::to_string(d));
+  const double N = static_cast<double>(rollouts.size());
+  const double n0 = s.prior_strength, m = s.prior_strength;
+
+  LgDynamics dyn(nx, nu, T);
+  Eigen::MatrixXd x0(nx, rollouts.size());
+  for (size_t i = 0; i < rollouts.size(); ++i) x0.col(i) = rollouts[i].x.col(0);
+  moments(x0, dyn.x0_mean, dyn.x0_cov);
+  dyn.x0_cov.diagonal().array() += s.regularization;
+
+  Eigen::MatrixXd z(d, rollouts.size()), S, S0(d, d), Fxu_t(nxu, nx);
+  Eigen::VectorXd mu, mu0(d), diff(d);
+  Eigen::LLT<Eigen::MatrixXd> llt;
+  for (int t = 0; t < T; ++t) {
+    for (size_t i = 0; i < rollouts.size(); ++i)
+      z.col(i) << rollouts[i].x.col(t), rollouts[i].u.col(t), rollouts[i].x.col(t + 1);
+    moments(z, mu, S);
+    if (prior) {
+      // Step t's prior: the mixture moment-matched with the points' mean responsibilities.
+      const Eigen::VectorXd w = prior->responsibilities(z).rowwise().mean();
+      mu0.setZero();
+      for (int k = 0; k < prior->clusters(); ++k) mu0 += w[k] * prior->means[k];
+      S0.setZero();
+      for (int k = 0; k < prior->clusters(); ++k) {
+        diff = prior->means[k] - mu0;
+        S0 += w[k] * (prior->covariances[k] + diff * diff.transpose());
+      }
+      diff = mu - mu0;
+      S = (n0 * S0 + N * S + (N * m / (N + m)) * diff * diff.transpose()) / (N + n0);
+      mu = (m * mu0 + N * mu) / (m + N);
+    }
+    // Condition the joint Gaussian on (x, u): F = S_x'z S_zz^-1.
+    Eigen::MatrixXd Szz = S.topLeftCorner(nxu, nxu);
+    Szz.diagonal().array() += s.regularization;
+    llt.compute(Szz);
+    if (llt.info() != Eigen::Success) throw std::runtime_error("fitDynamics: (x, u) covariance not positive definite");
+    Fxu_t = llt.solve(S.bottomLeftCorner(nx, nxu).transpose());  // (nxu x nx) = F'
+    dyn.Fx[t] = Fxu_t.topRows(nx).transpose();
+    dyn.Fu[t] = Fxu_t.bottomRows(nu).transpose();
+    dyn.f[t] = mu.tail(nx) - dyn.Fx[t] * mu.head(nx) - dyn.Fu[t] * mu.segment(nx, nu);
+    Eigen::MatrixXd sigma = S.bottomRightCorner(nx, nx) - S.bottomLeftCorner(nx, nxu) * Fxu_t;
+    sigma = 0.5 * (sigma + sigma.transpose());
+    sigma.diagonal().array() += s.regularization;
+    dyn.Sigma[t] = sigma;
+  }
+  return dyn;
+}
+
+}  // namespace adroit

@@ -1,0 +1,319 @@
+#include "adroit_learning/kl_update.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+namespace adroit {
+
+namespace {
+
+void checkDims(const char* where, int nx, int nu, int horizon) {
+  if (nx <= 0 || nu <= 0 || horizon <= 0)
+    throw std::invalid_argument(std::string(where) + ": nx, nu and horizon must be positive");
+}
+
+[[noreturn]] void badSize(const std::string& what) { throw std::invalid_argument("KlUpdate: " + what); }
+
+template <typename M>
+void checkEntries(const char* name, const std::vector<M>& v, int count, int rows, int cols) {
+  if (static_cast<int>(v.size()) != count)
+    badSize(std::string(name) + " has " + std::to_string(v.size()) + " entries, expected " + std::to_string(count));
+  for (int t = 0; t < count; ++t)
+    if (v[t].rows() != rows || v[t].cols() != cols)
+      badSize(std::string(name) + "[" + std::to_string(t) + "] is " + std::to_string(v[t].rows()) + "x" +
+              std::to_string(v[t].cols()) + ", expected " + std::to_string(rows) + "x" + std::to_string(cols));
+}
+
+double logDetFromCholesky(const Eigen::MatrixXd& L) { return 2.0 * L.diagonal().array().log().sum(); }
+
+}  // namespace
+
+void LgDynamics::resize(int nx_, int nu_, int horizon_) {
+  checkDims("LgDynamics::resize", nx_, nu_, horizon_);
+  nx = nx_;
+  nu = nu_;
+  horizon = horizon_;
+  x0_mean = Eigen::VectorXd::Zero(nx);
+  x0_cov = Eigen::MatrixXd::Zero(nx, nx);
+  Fx.assign(horizon, Eigen::MatrixXd::Zero(nx, nx));
+  Fu.assign(horizon, Eigen::MatrixXd::Zero(nx, nu));
+  Sigma.assign(horizon, Eigen::MatrixXd::Zero(nx, nx));
+  f.assign(horizon, Eigen::VectorXd::Zero(nx));
+}
+
+void QuadraticCost::resize(int nx, int nu, int horizon) {
+  checkDims("QuadraticCost::resize", nx, nu, horizon);
+  cxx.assign(horizon + 1, Eigen::MatrixXd::Zero(nx, nx));
+  cx.assign(horizon + 1, Eigen::VectorXd::Zero(nx));
+  cuu.assign(horizon, Eigen::MatrixXd::Zero(nu, nu));
+  cux.assign(horizon, Eigen::MatrixXd::Zero(nu, nx));
+  cu.assign(horizon, Eigen::VectorXd::Zero(nu));
+}
+
+void forwardMarginals(const LgDynamics& dyn, const LgController& c, TrajectoryMarginals& out) {
+  const int nx = dyn.nx, nu = dyn.nu, T = dyn.horizon;
+  if (c.nx() != nx || c.nu() != nu || c.horizon() != T)
+    throw std::invalid_argument("forwardMarginals: controller and dynamics sizes differ");
+  if (static_cast<int>(out.xu_mean.size()) != T) {
+    out.xu_mean.assign(T, Eigen::VectorXd::Zero(nx + nu));
+    out.xu_cov.assign(T, Eigen::MatrixXd::Zero(nx + nu, nx + nu));
+  }
+  Eigen::VectorXd mu = dyn.x0_mean;
+  Eigen::MatrixXd sigma = dyn.x0_cov;
+  Eigen::MatrixXd KS(nu, nx), G(nx, nx), GS(nx, nx), FuC(nx, nu), next(nx, nx);
+  for (int t = 0; t < T; ++t) {
+    const Eigen::MatrixXd& K = c.K[t];
+    Eigen::VectorXd& m = out.xu_mean[t];
+    Eigen::MatrixXd& S = out.xu_cov[t];
+    m.head(nx) = mu;
+    m.tail(nu).noalias() = K * mu;
+    m.tail(nu) += c.k[t];
+    KS.noalias() = K * sigma;
+    S.topLeftCorner(nx, nx) = sigma;
+    S.bottomLeftCorner(nu, nx) = KS;
+    S.topRightCorner(nx, nu) = KS.transpose();
+    S.bottomRightCorner(nu, nu) = c.covariance(t);
+    S.bottomRightCorner(nu, nu).noalias() += KS * K.transpose();
+
+    // x_{t+1}: mean Fx mu + Fu u + f, covariance G sigma G' + Fu C Fu' + Sigma with G = Fx + Fu K.
+    mu = dyn.f[t];
+    mu.noalias() += dyn.Fx[t] * m.head(nx);
+    mu.noalias() += dyn.Fu[t] * m.tail(nu);
+    G = dyn.Fx[t];
+    G.noalias() += dyn.Fu[t] * K;
+    FuC.noalias() = dyn.Fu[t] * c.covariance(t);
+    GS.noalias() = G * sigma;
+    next = dyn.Sigma[t];
+    next.noalias() += GS * G.transpose();
+    next.noalias() += FuC * dyn.Fu[t].transpose();
+    sigma = 0.5 * (next + next.transpose());
+  }
+  out.xT_mean = mu;
+  out.xT_cov = sigma;
+}
+
+double expectedCost(const QuadraticCost& cost, const TrajectoryMarginals& m) {
+  const int T = static_cast<int>(m.xu_mean.size());
+  double total = 0;
+  for (int t = 0; t < T; ++t) {
+    const int nx = static_cast<int>(cost.cxx[t].rows()), nu = static_cast<int>(cost.cuu[t].rows());
+    const auto x = m.xu_mean[t].head(nx);
+    const auto u = m.xu_mean[t].tail(nu);
+    const Eigen::MatrixXd& S = m.xu_cov[t];
+    // E[0.5 z'Hz + h'z] = 0.5 (tr(H S) + m'Hm) + h'm, blockwise with H = [cxx cux'; cux cuu].
+    total += 0.5 * (cost.cxx[t].cwiseProduct(S.topLeftCorner(nx, nx)).sum() +
+                    cost.cuu[t].cwiseProduct(S.bottomRightCorner(nu, nu)).sum()) +
+             cost.cux[t].cwiseProduct(S.bottomLeftCorner(nu, nx)).sum();
+    total += 0.5 * x.dot(cost.cxx[t] * x) + 0.5 * u.dot(cost.cuu[t] * u) + u.dot(cost.cux[t] * x);
+    total += cost.cx[t].dot(x) + cost.cu[t].dot(u);
+  }
+  total += 0.5 * (cost.cxx[T].cwiseProduct(m.xT_cov).sum() + m.xT_mean.dot(cost.cxx[T] * m.xT_mean)) +
+           cost.cx[T].dot(m.xT_mean);
+  return total;
+}
+
+double klDivergence(const LgController& p, const LgController& q, const TrajectoryMarginals& m) {
+  const int nx = p.nx(), nu = p.nu(), T = p.horizon();
+  if (q.nx() != nx || q.nu() != nu || q.horizon() != T || static_cast<int>(m.xu_mean.size()) != T)
+    throw std::invalid_argument("klDivergence: controller and marginal sizes differ");
+  double kl = 0;
+  Eigen::MatrixXd Linv_dK(nu, nx), Linv_Lp(nu, nu);
+  Eigen::VectorXd d(nu);
+  for (int t = 0; t < T; ++t) {
+    // With q's covariance L L':  tr(P_q C_p) = |L^-1 L_p|_F^2 and the mean terms are
+    // |L^-1 (dK mu + dk)|^2 + tr(dK' P_q dK Sigma_x) = |L^-1 dK Sigma_x^1/2|^2 (via trace).
+    const auto Lq = q.choleskyFactor(t).triangularView<Eigen::Lower>();
+    const auto mu = m.xu_mean[t].head(nx);
+    const auto sigma = m.xu_cov[t].topLeftCorner(nx, nx);
+    Linv_dK = p.K[t] - q.K[t];
+    d = p.k[t] - q.k[t];
+    d.noalias() += Linv_dK * mu;
+    Lq.solveInPlace(Linv_dK);
+    Lq.solveInPlace(d);
+    Linv_Lp = p.choleskyFactor(t);
+    Lq.solveInPlace(Linv_Lp);
+    const double trace_term = Linv_Lp.squaredNorm();
+    const double state_term = (Linv_dK * sigma).cwiseProduct(Linv_dK).sum();
+    kl += 0.5 * (trace_term - nu + logDetFromCholesky(q.choleskyFactor(t)) - logDetFromCholesky(p.choleskyFactor(t)) +
+                 d.squaredNorm() + state_term);
+  }
+  return std::max(0.0, kl);  // rounding can leave -1e-16
+}
+
+KlUpdate::KlUpdate(int nx, int nu, int horizon)
+    : nx_(nx),
+      nu_(nu),
+      horizon_(horizon),
+      lq_(nx + 1, nu, horizon),
+      pass_(nx + 1, nu, horizon),
+      P_(nu, nu),
+      PK_(nu, nx),
+      Pk_(nu),
+      llt_(nu) {
+  gains_.resize(nx + 1, nu, horizon);
+}
+
+void KlUpdate::checkSizes(const LgDynamics& dyn, const QuadraticCost& cost, const LgController* prev) const {
+  if (dyn.nx != nx_ || dyn.nu != nu_ || dyn.horizon != horizon_)
+    badSize("dynamics are nx=" + std::to_string(dyn.nx) + " nu=" + std::to_string(dyn.nu) + " T=" +
+            std::to_string(dyn.horizon) + ", update built for nx=" + std::to_string(nx_) + " nu=" +
+            std::to_string(nu_) + " T=" + std::to_string(horizon_));
+  const int T = horizon_;
+  checkEntries("Fx", dyn.Fx, T, nx_, nx_);
+  checkEntries("Fu", dyn.Fu, T, nx_, nu_);
+  checkEntries("f", dyn.f, T, nx_, 1);
+  checkEntries("Sigma", dyn.Sigma, T, nx_, nx_);
+  if (dyn.x0_mean.size() != nx_ || dyn.x0_cov.rows() != nx_ || dyn.x0_cov.cols() != nx_)
+    badSize("x0_mean / x0_cov have the wrong size");
+  checkEntries("cxx", cost.cxx, T + 1, nx_, nx_);
+  checkEntries("cx", cost.cx, T + 1, nx_, 1);
+  checkEntries("cuu", cost.cuu, T, nu_, nu_);
+  checkEntries("cux", cost.cux, T, nu_, nx_);
+  checkEntries("cu", cost.cu, T, nu_, 1);
+  if (prev && (prev->nx() != nx_ || prev->nu() != nu_ || prev->horizon() != T))
+    badSize("previous controller sizes differ from the dynamics");
+}
+
+bool KlUpdate::solve(const LgDynamics& dyn, const QuadraticCost& cost, const LgController* prev, double eta,
+                     LgController& out) {
+  checkSizes(dyn, cost, prev);
+  const int nx = nx_, nu = nu_, T = horizon_;
+  const double w = prev ? 1.0 / eta : 1.0;  // weight of the task cost
+  if (!(w > 0) || !std::isfinite(w)) throw std::invalid_argument("KlUpdate::solve: eta must be positive and finite");
+
+  // Augmented state [x; 1]: dynamics [Fx f; 0 1], [Fu; 0]. Only the blocks that can change
+  // are written; the rest stays as resize() left it (zeros, and the 1 below).
+  for (int t = 0; t < T; ++t) {
+    Eigen::MatrixXd& A = lq_.A[t];
+    A.topLeftCorner(nx, nx) = dyn.Fx[t];
+    A.topRightCorner(nx, 1) = dyn.f[t];
+    A(nx, nx) = 1.0;
+    lq_.B[t].topRows(nx) = dyn.Fu[t];
+
+    // Task cost times w.
+    lq_.lxx[t].topLeftCorner(nx, nx) = w * cost.cxx[t];
+    lq_.lx[t].head(nx) = w * cost.cx[t];
+    lq_.luu[t] = w * cost.cuu[t];
+    lq_.lux[t].leftCols(nx) = w * cost.cux[t];
+    lq_.lu[t] = w * cost.cu[t];
+    if (!prev) continue;
+    // -log p_old(u|x) = 0.5 (u - Kx - k)' P (u - Kx - k) + const,  P = C_old^-1:
+    //   xx: K'PK   ux: -PK   uu: P   x: K'Pk   u: -Pk
+    const Eigen::MatrixXd& K = prev->K[t];
+    llt_.compute(prev->covariance(t));
+    P_.setIdentity();
+    llt_.solveInPlace(P_);
+    PK_.noalias() = P_ * K;
+    Pk_.noalias() = P_ * prev->k[t];
+    lq_.lxx[t].topLeftCorner(nx, nx).noalias() += K.transpose() * PK_;
+    lq_.lux[t].leftCols(nx) -= PK_;
+    lq_.luu[t] += P_;
+    lq_.lx[t].head(nx).noalias() += K.transpose() * Pk_;
+    lq_.lu[t] -= Pk_;
+  }
+  lq_.lxx[T].topLeftCorner(nx, nx) = w * cost.cxx[T];
+  lq_.lx[T].head(nx) = w * cost.cx[T];
+
+  static const std::vector<Eigen::VectorXd> kNoNominal;  // unconstrained: not read
+  const BackwardPassResult r = pass_.run(lq_, kNoNominal, Eigen::VectorXd(), Eigen::VectorXd(), 0.0, gains_);
+  if (!r.ok) return false;
+
+  if (out.nx() != nx || out.nu() != nu || out.horizon() != T) out = LgController(nx, nu, T);
+  for (int t = 0; t < T; ++t) {
+    // u = k~ + K~ [x; 1]  ->  K = K~(:, 0:nx), k = k~ + K~(:, nx).
+    out.K[t] = gains_.K[t].leftCols(nx);
+    out.k[t] = gains_.k[t] + gains_.K[t].col(nx);
+    llt_.compute(pass_.Quu(t));
+    if (llt_.info() != Eigen::Success) return false;
+    P_.setIdentity();
+    llt_.solveInPlace(P_);  // C = Quu^-1
+    if (!P_.allFinite() || !out.K[t].allFinite() || !out.k[t].allFinite()) return false;
+    try {
+      out.setCovariance(t, 0.5 * (P_ + P_.transpose()));
+    } catch (const std::invalid_argument&) {
+      return false;  // Quu^-1 numerically not PD (extremely ill-conditioned Quu)
+    }
+  }
+  return true;
+}
+
+KlUpdateResult KlUpdate::update(const LgDynamics& dyn, const QuadraticCost& cost, const LgController& prev,
+                                double epsilon, const KlUpdateSettings& s) {
+  checkSizes(dyn, cost, &prev);
+  if (!(epsilon > 0) || !std::isfinite(epsilon))
+    throw std::invalid_argument("KlUpdate::update: epsilon must be positive and finite");
+  if (!(s.eta_min > 0 && s.eta_min <= s.eta_max && std::isfinite(s.eta_max)))
+    throw std::invalid_argument("KlUpdate::update: need 0 < eta_min <= eta_max < inf");
+
+  // KL decreases with eta (eta -> inf: the old controller). lo: largest eta known to give
+  // KL above the band (or a failed solve); hi: smallest eta known to give KL below it.
+  double lo = 0, hi = std::numeric_limits<double>::infinity();
+  double eta = std::min(std::max(s.eta_init, s.eta_min), s.eta_max);
+  // Fallbacks when the band is not reached: the last controller inside the constraint, else
+  // the last one solved at all.
+  KlUpdateResult current, best, last;
+  bool have_best = false, have_last = false;
+  for (int it = 1; it <= s.max_iterations; ++it) {
+    const bool ok = solve(dyn, cost, &prev, eta, current.controller);
+    double kl = std::numeric_limits<double>::infinity();
+    if (ok) {
+      forwardMarginals(dyn, current.controller, marginals_);
+      kl = klDivergence(current.controller, prev, marginals_);
+      if (!std::isfinite(kl)) kl = std::numeric_limits<double>::infinity();
+    }
+    if (std::isfinite(kl)) {
+      current.eta = eta;
+      current.kl = kl;
+      current.predicted_cost = expectedCost(cost, marginals_);
+      current.iterations = it;
+      const bool in_band = std::abs(kl - epsilon) <= s.tolerance * epsilon;
+      const bool slack = kl < epsilon && eta <= s.eta_min;
+      if (in_band || slack) {
+        current.converged = true;
+        return current;
+      }
+      if (kl < epsilon) {
+        best = current;
+        have_best = true;
+      }
+      last = current;
+      have_last = true;
+    }
+    if (kl < epsilon) {
+      hi = eta;
+    } else {
+      lo = eta;
+      if (eta >= s.eta_max) break;  // even the largest eta moves too far (or fails)
+    }
+    // Next eta: geometric bisection once bracketed, else steps of 10 toward the bracket.
+    if (lo > 0 && std::isfinite(hi))
+      eta = std::sqrt(lo * hi);
+    else if (lo > 0)
+      eta = std::min(lo * 10.0, s.eta_max);
+    else
+      eta = std::max(hi / 10.0, s.eta_min);
+  }
+  if (have_best) return best;  // not converged, but inside the constraint
+  if (have_last) return last;  // not converged: KL above epsilon even at the largest eta tried
+  throw std::runtime_error("KlUpdate::update: no eta in [" + std::to_string(s.eta_min) + ", " +
+                           std::to_string(s.eta_max) + "] gives a positive definite Q_uu");
+}
+
+double adjustEpsilon(double epsilon, double previous_expected, double predicted, double previous_actual,
+                     double actual, const StepSizeSettings& s) {
+  const double predicted_improvement = previous_expected - predicted;
+  const double actual_improvement = previous_actual - actual;
+  double multiplier;
+  if (!(predicted_improvement > 0))
+    multiplier = s.min_multiplier;  // the model promises nothing: smaller steps
+  else if (!(predicted_improvement - actual_improvement > 0))
+    multiplier = s.max_multiplier;  // reality did at least as well as predicted
+  else
+    multiplier = predicted_improvement / (2.0 * (predicted_improvement - actual_improvement));
+  return epsilon * std::min(std::max(multiplier, s.min_multiplier), s.max_multiplier);
+}
+
+}  // namespace adroit

@@ -40,19 +40,71 @@ Eigen::MatrixXd transitionPoints(const std::vector<Rollout>& rollouts) {
   return z;
 }
 
-Eigen::MatrixXd Gmm::logJoint(const Eigen::MatrixXd& points) const {
-  const int K = clusters();
-  Eigen::MatrixXd out(K, points.cols());
-  Eigen::LLT<Eigen::MatrixXd> llt;
-  for (int k = 0; k < K; ++k) {
-    llt.compute(covariances[k]);
-    if (llt.info() != Eigen::Success) throw std::runtime_error("Gmm: a covariance is not positive definite");
-    const double log_det = 2.0 * llt.matrixL().toDenseMatrix().diagonal().array().log().sum();
-    Eigen::MatrixXd y = points.colwise() - means[k];
-    llt.matrixL().solveInPlace(y);
-    const double log_w = weights[k] > 0 ? std::log(weights[k]) : -std::numeric_limits<double>::infinity();
-    out.row(k) = (-0.5 * (y.colwise().squaredNorm().array() + log_det + points.rows() * kLog2Pi) + log_w).matrix();
+namespace {
+
+// Cholesky factors of a mixture's covariances and their log-determinants, computed once and
+// shared by every evaluation that needs them (EM's E-step and objective, the per-step prior
+// of fitDynamics).
+struct GmmFactors {
+  std::vector<Eigen::LLT<Eigen::MatrixXd>> llt;
+  std::vector<double> log_det;
+
+  void compute(const std::vector<Eigen::MatrixXd>& covariances) {
+    llt.resize(covariances.size());
+    log_det.resize(covariances.size());
+    for (size_t k = 0; k < covariances.size(); ++k) {
+      llt[k].compute(covariances[k]);
+      if (llt[k].info() != Eigen::Success) throw std::runtime_error("Gmm: a covariance is not positive definite");
+      log_det[k] = 2.0 * llt[k].matrixLLT().diagonal().array().log().sum();
+    }
   }
+  // sum_k tr(S_k^-1) = sum_k |L_k^-1|_F^2.
+  double traceOfInverses() const {
+    double total = 0;
+    for (const auto& f : llt) {
+      Eigen::MatrixXd inv = Eigen::MatrixXd::Identity(f.rows(), f.cols());
+      f.matrixL().solveInPlace(inv);
+      total += inv.squaredNorm();
+    }
+    return total;
+  }
+};
+
+// log w_k + log N(z; mu_k, S_k) (clusters x points) into `out`; y: scratch.
+void logJointFactored(const Gmm& gmm, const GmmFactors& factors, const Eigen::MatrixXd& points, Eigen::MatrixXd& out,
+                      Eigen::MatrixXd& y) {
+  const int K = gmm.clusters();
+  out.resize(K, points.cols());
+  for (int k = 0; k < K; ++k) {
+    y = points.colwise() - gmm.means[k];
+    factors.llt[k].matrixL().solveInPlace(y);
+    const double log_w =
+        gmm.weights[k] > 0 ? std::log(gmm.weights[k]) : -std::numeric_limits<double>::infinity();
+    out.row(k) =
+        (-0.5 * (y.colwise().squaredNorm().array() + factors.log_det[k] + points.rows() * kLog2Pi) + log_w).matrix();
+  }
+}
+
+// Column-wise log-sum-exp of lj (the log density of each point), and lj turned into the
+// responsibilities in place when `normalise`.
+double logSumExpColumns(Eigen::MatrixXd& lj, bool normalise) {
+  double total = 0;
+  for (Eigen::Index i = 0; i < lj.cols(); ++i) {
+    const double m = lj.col(i).maxCoeff();
+    const double sum = (lj.col(i).array() - m).exp().sum();
+    total += m + std::log(sum);
+    if (normalise) lj.col(i) = (lj.col(i).array() - m).exp().matrix() / sum;
+  }
+  return total;
+}
+
+}  // namespace
+
+Eigen::MatrixXd Gmm::logJoint(const Eigen::MatrixXd& points) const {
+  GmmFactors factors;
+  factors.compute(covariances);
+  Eigen::MatrixXd out, y;
+  logJointFactored(*this, factors, points, out, y);
   return out;
 }
 
@@ -108,7 +160,7 @@ double Gmm::fitOnce(const Eigen::MatrixXd& points, const GmmSettings& s, std::ui
                     std::vector<double>& history) {
   const Eigen::Index n = points.cols(), d = points.rows();
   const int K = s.clusters;
-  const Eigen::MatrixXd ridge = s.regularization * Eigen::MatrixXd::Identity(d, d);
+  Eigen::MatrixXd scaled(d, n);
 
   // M-step for responsibilities r (clusters x points).
   const auto maximise = [&](const Eigen::MatrixXd& r) {
@@ -116,10 +168,15 @@ double Gmm::fitOnce(const Eigen::MatrixXd& points, const GmmSettings& s, std::ui
       const double nk = std::max(r.row(k).sum(), 1e-12);
       weights[k] = r.row(k).sum() / static_cast<double>(n);
       means[k] = points * r.row(k).transpose() / nk;
-      const Eigen::MatrixXd centred = points.colwise() - means[k];
-      covariances[k].noalias() = centred * r.row(k).asDiagonal() * centred.transpose();
-      covariances[k] += ridge;
-      covariances[k] /= nk;
+      // Weighted scatter sum_i r_ki (z_i - mu_k)(z_i - mu_k)' as one symmetric rank update
+      // of the columns scaled by sqrt(r_ki) (half the work of the general product).
+      scaled = (points.colwise() - means[k]) * r.row(k).cwiseMax(0.0).cwiseSqrt().asDiagonal();
+      Eigen::MatrixXd& S = covariances[k];
+      S.setZero();
+      S.selfadjointView<Eigen::Lower>().rankUpdate(scaled);
+      S.diagonal().array() += s.regularization;
+      S /= nk;
+      S.triangularView<Eigen::StrictlyUpper>() = S.transpose();
     }
   };
 
@@ -151,10 +208,19 @@ double Gmm::fitOnce(const Eigen::MatrixXd& points, const GmmSettings& s, std::ui
   for (Eigen::Index i = 0; i < n; ++i) hard(owner[i], i) = 1.0;
   maximise(hard);
 
-  history.assign(1, penalisedLogLikelihood(points, s.regularization));
+  // One factorisation and one log-joint per iteration: the objective of the current
+  // parameters and the next E-step's responsibilities come from the same evaluation.
+  GmmFactors factors;
+  Eigen::MatrixXd lj, y;
+  const auto objective = [&](bool normalise) {
+    factors.compute(covariances);
+    logJointFactored(*this, factors, points, lj, y);
+    return logSumExpColumns(lj, normalise) - 0.5 * s.regularization * factors.traceOfInverses();
+  };
+  history.assign(1, objective(true));
   for (int it = 0; it < s.max_iterations; ++it) {
-    maximise(responsibilities(points));  // E-step, M-step
-    history.push_back(penalisedLogLikelihood(points, s.regularization));
+    maximise(lj);  // lj holds the responsibilities of the current parameters
+    history.push_back(objective(true));
     if (history.back() - history[history.size() - 2] < s.tolerance * static_cast<double>(n)) break;
   }
   return history.back();
@@ -180,6 +246,9 @@ LgDynamics fitDynamics(const std::vector<Rollout>& rollouts, const Gmm* prior, c
   moments(x0, dyn.x0_mean, dyn.x0_cov);
   dyn.x0_cov.diagonal().array() += s.regularization;
 
+  GmmFactors prior_factors;  // the prior's Cholesky factors, once for all steps
+  if (prior) prior_factors.compute(prior->covariances);
+  Eigen::MatrixXd lj, scratch;
   Eigen::MatrixXd z(d, rollouts.size()), S, S0(d, d), Fxu_t(nxu, nx);
   Eigen::VectorXd mu, mu0(d), diff(d);
   Eigen::LLT<Eigen::MatrixXd> llt;
@@ -189,7 +258,9 @@ LgDynamics fitDynamics(const std::vector<Rollout>& rollouts, const Gmm* prior, c
     moments(z, mu, S);
     if (prior) {
       // Step t's prior: the mixture moment-matched with the points' mean responsibilities.
-      const Eigen::VectorXd w = prior->responsibilities(z).rowwise().mean();
+      logJointFactored(*prior, prior_factors, z, lj, scratch);
+      logSumExpColumns(lj, true);
+      const Eigen::VectorXd w = lj.rowwise().mean();
       mu0.setZero();
       for (int k = 0; k < prior->clusters(); ++k) mu0 += w[k] * prior->means[k];
       S0.setZero();

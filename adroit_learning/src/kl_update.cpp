@@ -177,42 +177,70 @@ void KlUpdate::checkSizes(const LgDynamics& dyn, const QuadraticCost& cost, cons
     badSize("previous controller sizes differ from the dynamics");
 }
 
-bool KlUpdate::solve(const LgDynamics& dyn, const QuadraticCost& cost, const LgController* prev, double eta,
-                     LgController& out) {
-  checkSizes(dyn, cost, prev);
-  const int nx = nx_, nu = nu_, T = horizon_;
-  const double w = prev ? 1.0 / eta : 1.0;  // weight of the task cost
-  if (!(w > 0) || !std::isfinite(w)) throw std::invalid_argument("KlUpdate::solve: eta must be positive and finite");
-
+void KlUpdate::loadDynamics(const LgDynamics& dyn) {
   // Augmented state [x; 1]: dynamics [Fx f; 0 1], [Fu; 0]. Only the blocks that can change
   // are written; the rest stays as resize() left it (zeros, and the 1 below).
-  for (int t = 0; t < T; ++t) {
+  const int nx = nx_;
+  for (int t = 0; t < horizon_; ++t) {
     Eigen::MatrixXd& A = lq_.A[t];
     A.topLeftCorner(nx, nx) = dyn.Fx[t];
     A.topRightCorner(nx, 1) = dyn.f[t];
     A(nx, nx) = 1.0;
     lq_.B[t].topRows(nx) = dyn.Fu[t];
+  }
+}
 
+void KlUpdate::loadPrevious(const LgController& prev) {
+  // -log p_old(u|x) = 0.5 (u - Kx - k)' P (u - Kx - k) + const,  P = C_old^-1:
+  //   xx: K'PK   ux: -PK   uu: P   x: K'Pk   u: -Pk
+  // The same for every eta: computed once per update.
+  const int nx = nx_, nu = nu_, T = horizon_;
+  if (static_cast<int>(prev_P_.size()) != T) {
+    prev_P_.assign(T, Eigen::MatrixXd(nu, nu));
+    prev_PK_.assign(T, Eigen::MatrixXd(nu, nx));
+    prev_KPK_.assign(T, Eigen::MatrixXd(nx, nx));
+    prev_Pk_.assign(T, Eigen::VectorXd(nu));
+    prev_KPk_.assign(T, Eigen::VectorXd(nx));
+  }
+  for (int t = 0; t < T; ++t) {
+    const Eigen::MatrixXd& K = prev.K[t];
+    // P = L^-T L^-1 from the controller's Cholesky factor C = L L'.
+    P_.setIdentity();
+    prev.choleskyFactor(t).triangularView<Eigen::Lower>().solveInPlace(P_);  // L^-1
+    prev_P_[t].noalias() = P_.transpose() * P_;
+    prev_PK_[t].noalias() = prev_P_[t] * K;
+    prev_Pk_[t].noalias() = prev_P_[t] * prev.k[t];
+    prev_KPK_[t].noalias() = K.transpose() * prev_PK_[t];
+    prev_KPk_[t].noalias() = K.transpose() * prev_Pk_[t];
+  }
+}
+
+bool KlUpdate::solve(const LgDynamics& dyn, const QuadraticCost& cost, const LgController* prev, double eta,
+                     LgController& out) {
+  checkSizes(dyn, cost, prev);
+  loadDynamics(dyn);
+  if (prev) loadPrevious(*prev);
+  return solveLoaded(cost, prev != nullptr, eta, out);
+}
+
+bool KlUpdate::solveLoaded(const QuadraticCost& cost, bool with_prev, double eta, LgController& out) {
+  const int nx = nx_, nu = nu_, T = horizon_;
+  const double w = with_prev ? 1.0 / eta : 1.0;  // weight of the task cost
+  if (!(w > 0) || !std::isfinite(w)) throw std::invalid_argument("KlUpdate::solve: eta must be positive and finite");
+
+  for (int t = 0; t < T; ++t) {
     // Task cost times w.
     lq_.lxx[t].topLeftCorner(nx, nx) = w * cost.cxx[t];
     lq_.lx[t].head(nx) = w * cost.cx[t];
     lq_.luu[t] = w * cost.cuu[t];
     lq_.lux[t].leftCols(nx) = w * cost.cux[t];
     lq_.lu[t] = w * cost.cu[t];
-    if (!prev) continue;
-    // -log p_old(u|x) = 0.5 (u - Kx - k)' P (u - Kx - k) + const,  P = C_old^-1:
-    //   xx: K'PK   ux: -PK   uu: P   x: K'Pk   u: -Pk
-    const Eigen::MatrixXd& K = prev->K[t];
-    llt_.compute(prev->covariance(t));
-    P_.setIdentity();
-    llt_.solveInPlace(P_);
-    PK_.noalias() = P_ * K;
-    Pk_.noalias() = P_ * prev->k[t];
-    lq_.lxx[t].topLeftCorner(nx, nx).noalias() += K.transpose() * PK_;
-    lq_.lux[t].leftCols(nx) -= PK_;
-    lq_.luu[t] += P_;
-    lq_.lx[t].head(nx).noalias() += K.transpose() * Pk_;
-    lq_.lu[t] -= Pk_;
+    if (!with_prev) continue;
+    lq_.lxx[t].topLeftCorner(nx, nx) += prev_KPK_[t];
+    lq_.lux[t].leftCols(nx) -= prev_PK_[t];
+    lq_.luu[t] += prev_P_[t];
+    lq_.lx[t].head(nx) += prev_KPk_[t];
+    lq_.lu[t] -= prev_Pk_[t];
   }
   lq_.lxx[T].topLeftCorner(nx, nx) = w * cost.cxx[T];
   lq_.lx[T].head(nx) = w * cost.cx[T];
@@ -250,6 +278,8 @@ KlUpdateResult KlUpdate::update(const LgDynamics& dyn, const QuadraticCost& cost
 
   // KL decreases with eta (eta -> inf: the old controller). lo: largest eta known to give
   // KL above the band (or a failed solve); hi: smallest eta known to give KL below it.
+  loadDynamics(dyn);
+  loadPrevious(prev);
   double lo = 0, hi = std::numeric_limits<double>::infinity();
   double eta = std::min(std::max(s.eta_init, s.eta_min), s.eta_max);
   // Fallbacks when the band is not reached: the last controller inside the constraint, else
@@ -257,7 +287,7 @@ KlUpdateResult KlUpdate::update(const LgDynamics& dyn, const QuadraticCost& cost
   KlUpdateResult current, best, last;
   bool have_best = false, have_last = false;
   for (int it = 1; it <= s.max_iterations; ++it) {
-    const bool ok = solve(dyn, cost, &prev, eta, current.controller);
+    const bool ok = solveLoaded(cost, true, eta, current.controller);
     double kl = std::numeric_limits<double>::infinity();
     if (ok) {
       forwardMarginals(dyn, current.controller, marginals_);

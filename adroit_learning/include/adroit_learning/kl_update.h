@@ -96,12 +96,19 @@ class KlUpdate {
 
  private:
   void checkSizes(const LgDynamics& dyn, const QuadraticCost& cost, const LgController* prev) const;
+  // The parts of the surrogate LQ problem that do not depend on eta, loaded once per update:
+  // the augmented dynamics, and the old controller's -log p_old(u|x) terms.
+  void loadDynamics(const LgDynamics& dyn);
+  void loadPrevious(const LgController& prev);
+  bool solveLoaded(const QuadraticCost& cost, bool with_prev, double eta, LgController& out);
   int nx_, nu_, horizon_;
   LqApproximation lq_;
   BackwardPass pass_;
   FeedbackGains gains_;
   Eigen::MatrixXd P_, PK_;  // old controller's precision and precision * K
   Eigen::VectorXd Pk_;
+  std::vector<Eigen::MatrixXd> prev_P_, prev_PK_, prev_KPK_;  // per step, of the loaded old controller
+  std::vector<Eigen::VectorXd> prev_Pk_, prev_KPk_;
   Eigen::LLT<Eigen::MatrixXd> llt_;
   TrajectoryMarginals marginals_;
 };

@@ -270,7 +270,7 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  if (iterations < 2) iterations = 2;
+  if (iterations < kHistory) iterations = kHistory;  // at least one iteration with the full history
 
   std::printf("learning_bench: nx %d, nu %d, T %d, N %d rollouts per iteration, GMM over the last %d iterations\n",
               kNx, kNu, kT, kN, kHistory);
@@ -406,7 +406,13 @@ int main(int argc, char** argv) {
     if (std::system(command.c_str()) != 0) std::printf("plot_learning.py failed (CSV written)\n");
   }
 
-  result("compute_per_iteration_s", total.summary().median, "s", "<=", 1.0);
+  // The requirement is on a trainer's steady state: only iterations whose GMM already sees
+  // the full history of kHistory iterations count (the GMM's cost grows with it).
+  adroit::SampleStats steady;
+  for (std::size_t i = kHistory - 1; i < records.size(); ++i) steady.add(records[i].total());
+  std::printf("  %-34s %s (iterations >= %d: full GMM history)\n", "total compute, steady state",
+              adroit::formatSummary(steady.summary(), 1e3, "ms").c_str(), kHistory - 1);
+  result("compute_per_iteration_s", steady.summary().median, "s", "<=", 1.0);
   for (const auto& line : g_results) std::printf("%s\n", line.c_str());
   // Informational: compute and rollouts would overlap only with a pipelined trainer.
   std::printf("FIGURE adroit_learning/compute_over_rollout_ratio %.4g ratio (median of the paired blocks; "

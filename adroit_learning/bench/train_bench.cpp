@@ -1,0 +1,146 @@
+// Trainer benchmark (issue 13's required results, in simulation, one run): trains each task
+// from scratch with the in-process workers (the driver's ROS-free core: same plant, sensors
+// and safety), prints every iteration, writes <out>/<task>/learning_curve.csv (+ png through
+// plot_learning_curve.py), and ends with RESULT lines:
+//   positioning (with / against gravity): joint RMS error at T <= 0.05 rad within 15 x 5
+//   rollouts. The baseline printed next to it is the initial controller's error (iteration 0).
+//
+// Usage: train_bench [--tasks a,b] [--iterations N] [--samples N] [--seed S] [--workers W]
+//                    [--out DIR]
+#include <adroit_description/scenes.h>
+#include <adroit_learning/sim_rollouts.h>
+#include <adroit_learning/trainer.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <sys/stat.h>
+#include <vector>
+
+namespace {
+
+// The first prefix on CMAKE_PREFIX_PATH holding `share/<package>/<marker>`.
+std::string shareDir(const std::string& package, const std::string& marker) {
+  const char* value = std::getenv("CMAKE_PREFIX_PATH");
+  std::stringstream list(value ? value : "");
+  for (std::string prefix; std::getline(list, prefix, ':');) {
+    const std::string dir = prefix + "/share/" + package;
+    if (std::ifstream(dir + "/" + marker).good()) return dir;
+  }
+  throw std::runtime_error(package + " not found on CMAKE_PREFIX_PATH (source the workspace's setup.bash)");
+}
+
+std::vector<std::string> split(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream in(s);
+  for (std::string item; std::getline(in, item, ',');)
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+struct TaskResult {
+  std::string task;
+  double initial_rms = 0, best_rms = 1e9;
+  int best_iteration = -1, first_success_iteration = -1;
+  double compute_s = 0, rollout_s = 0;
+  int iterations = 0;
+};
+
+TaskResult train(const std::string& name, const std::string& tasks_dir, const std::string& description_dir,
+                 const adroit::TrainerSettings& base, int workers) {
+  const adroit::TrainingTask task = adroit::findTrainingTask(tasks_dir, name);
+  adroit::driver::SimConfig config;
+  config.model_path = adroit::description::sceneFile(description_dir, task.scene, false);
+  config.mode = adroit::driver::ActuationMode::kPneumatic;
+  adroit::SimRollouts sim(config, workers);
+  adroit::TrainerSettings settings = base;
+  settings.output_dir = base.output_dir + "/" + name;
+  ::mkdir(base.output_dir.c_str(), 0755);
+  adroit::Trainer trainer(task, settings, sim);
+  std::printf("\n== %s (%s): nx %d, nu %d, T %d x %.0f ms, %d x %d rollouts, %d workers\n", name.c_str(),
+              task.description.c_str(), trainer.layout().nx(), trainer.layout().nu(), task.horizon,
+              task.control_dt * 1e3, settings.iterations, settings.samples, sim.workers());
+  std::printf("%4s %12s %10s %9s %6s %8s %9s %9s %8s %8s\n", "iter", "cost", "+-", "rms[rad]", "succ", "KL", "eps",
+              "eta", "roll[s]", "comp[s]");
+  TaskResult res;
+  res.task = name;
+  while (!trainer.finished()) {
+    const adroit::IterationReport r = trainer.iterate();
+    if (!r.ok) {
+      std::printf("%4d  failed: %s\n", r.iteration, r.message.c_str());
+      continue;
+    }
+    const double compute = r.gmm_s + r.dynamics_s + r.cost_s + r.update_s;
+    std::printf("%4d %12.5g %10.3g %9.4f %3d/%-2d %8.3g %9.3g %9.3g %8.3f %8.3f\n", r.iteration, r.cost_mean,
+                r.cost_std, r.joint_rms_mean, r.successes, r.samples, r.kl, r.epsilon, r.eta, r.rollout_s, compute);
+    std::fflush(stdout);
+    if (r.iteration == 0) res.initial_rms = r.joint_rms_mean;
+    if (r.joint_rms_mean < res.best_rms) res.best_rms = r.joint_rms_mean, res.best_iteration = r.iteration;
+    if (res.first_success_iteration < 0 && r.joint_rms_mean <= task.success_joint_rms)
+      res.first_success_iteration = r.iteration;
+    res.compute_s += compute;
+    res.rollout_s += r.rollout_s;
+    ++res.iterations;
+  }
+  const std::string plot = "/usr/bin/python3 '" + shareDir("adroit_learning", "scripts/plot_learning_curve.py") +
+                           "/scripts/plot_learning_curve.py' '" + settings.output_dir + "/learning_curve.csv' '" +
+                           settings.output_dir + "/learning_curve.png' '" + name + "'";
+  if (std::system(plot.c_str()) != 0) std::printf("(plot not written: %s)\n", plot.c_str());
+  return res;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::vector<std::string> tasks = {"position_with_gravity", "position_against_gravity"};
+  adroit::TrainerSettings settings;
+  settings.iterations = 15;
+  settings.samples = 5;
+  int workers = 0;
+  std::string out = "train_bench_out";
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    const auto value = [&]() -> std::string {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "%s needs a value\n", a.c_str());
+        std::exit(2);
+      }
+      return argv[++i];
+    };
+    if (a == "--tasks") tasks = split(value());
+    else if (a == "--iterations") settings.iterations = std::atoi(value().c_str());
+    else if (a == "--samples") settings.samples = std::atoi(value().c_str());
+    else if (a == "--seed") settings.seed = std::strtoull(value().c_str(), nullptr, 10);
+    else if (a == "--workers") workers = std::atoi(value().c_str());
+    else if (a == "--smoothing") settings.smoothing_width = std::atof(value().c_str());
+    else if (a == "--noise") settings.noise_scale = std::atof(value().c_str());
+    else if (a == "--out") out = value();
+    else {
+      std::fprintf(stderr, "usage: train_bench [--tasks a,b] [--iterations N] [--samples N] [--seed S] "
+                           "[--workers W] [--smoothing STEPS] [--noise SCALE] [--out DIR]\n");
+      return 2;
+    }
+  }
+  const std::string bad = adroit::validate(settings);
+  if (!bad.empty()) {
+    std::fprintf(stderr, "train_bench: %s\n", bad.c_str());
+    return 2;
+  }
+  settings.output_dir = out;
+  const std::string tasks_dir = shareDir("adroit_learning", "config/tasks/position_with_gravity.yaml") + "/config/tasks";
+  const std::string description_dir = shareDir("adroit_description", "scenes.txt");
+  std::vector<TaskResult> results;
+  for (const auto& t : tasks) results.push_back(train(t, tasks_dir, description_dir, settings, workers));
+
+  std::printf("\n%-28s %12s %12s %10s %16s %14s\n", "task", "rms iter 0", "best rms", "best iter",
+              "first <= 0.05", "compute/roll");
+  for (const auto& r : results)
+    std::printf("%-28s %12.4f %12.4f %10d %16d %14.2f\n", r.task.c_str(), r.initial_rms, r.best_rms, r.best_iteration,
+                r.first_success_iteration, r.compute_s / r.rollout_s);
+  for (const auto& r : results)
+    std::printf("RESULT %s_joint_rms_rad %.4f target 0.05 within %d iterations (iteration 0: %.4f) %s\n",
+                r.task.c_str(), r.best_rms, r.iterations, r.initial_rms, r.best_rms <= 0.05 ? "PASS" : "FAIL");
+  return 0;
+}

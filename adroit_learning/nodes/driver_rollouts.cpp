@@ -1,0 +1,235 @@
+#include "driver_rollouts.h"
+
+#include <adroit_learning/sim_rollouts.h>
+#include <adroit_msgs/Reset.h>
+#include <adroit_msgs/Step.h>
+#include <std_srvs/SetBool.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <thread>
+
+namespace adroit::learning_node {
+
+namespace {
+
+// States of the last physics steps count as "after" a step ending at t: the actuator and
+// object streams run at every second physics step.
+constexpr double kStampSlack = 0.0045;
+
+}  // namespace
+
+DriverConnection::DriverConnection(ros::NodeHandle& nh, const std::string& ns, double timeout)
+    : ns_(ns), timeout_(timeout) {
+  ros::NodeHandle d(nh, ns);
+  const ros::TransportHints hints = ros::TransportHints().tcpNoDelay();
+  joints_sub_ = d.subscribe("joint_states", 20, &DriverConnection::onJoints, this, hints);
+  actuators_sub_ = d.subscribe("actuator_states", 20, &DriverConnection::onActuators, this, hints);
+  odom_sub_ = d.subscribe("object/odom", 20, &DriverConnection::onOdometry, this, hints);
+  safe_sub_ = d.subscribe("safe_state", 1, &DriverConnection::onSafeState, this);
+  valve_pub_ = d.advertise<adroit_msgs::ValveCommand>("valve_command", 10);
+  step_client_ = d.serviceClient<adroit_msgs::Step>("step", true);
+  reset_client_ = d.serviceClient<adroit_msgs::Reset>("reset", true);
+  pause_client_ = d.serviceClient<std_srvs::SetBool>("pause", true);
+}
+
+void DriverConnection::onJoints(const sensor_msgs::JointState::ConstPtr& msg) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  joints_ = msg;
+  cv_.notify_all();
+}
+void DriverConnection::onActuators(const adroit_msgs::ActuatorStates::ConstPtr& msg) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  actuators_ = msg;
+  cv_.notify_all();
+}
+void DriverConnection::onOdometry(const nav_msgs::Odometry::ConstPtr& msg) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  odom_ = msg;
+  cv_.notify_all();
+}
+void DriverConnection::onSafeState(const std_msgs::Bool::ConstPtr& msg) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  safe_state_ = msg->data;
+}
+
+bool DriverConnection::safe(std::string& error) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!safe_state_) return true;
+  error = "driver " + ns_ + " is in its safe state (e-stop, watchdog or fault); release it with " + ns_ +
+          "/estop_release once it is safe";
+  return false;
+}
+
+bool DriverConnection::waitForStreams(std::string& error) {
+  std::unique_lock<std::mutex> lock(mutex_);
+  if (cv_.wait_for(lock, std::chrono::duration<double>(timeout_), [&] { return joints_ && actuators_; })) return true;
+  error = "driver " + ns_ + ": no joint_states / actuator_states within " + std::to_string(timeout_) + " s";
+  return false;
+}
+
+std::vector<std::string> DriverConnection::jointNames() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return joints_ ? joints_->name : std::vector<std::string>{};
+}
+
+std::vector<std::string> DriverConnection::cylinderNames() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return actuators_ ? actuators_->name : std::vector<std::string>{};
+}
+
+bool DriverConnection::reset(const std::vector<double>& qpos, const std::vector<double>& pressure, double hold_volts,
+                             std::string& error) {
+  if (!safe(error)) return false;
+  std_srvs::SetBool pause;
+  pause.request.data = true;
+  if (!pause_client_.call(pause) || !pause.response.success) {
+    error = "driver " + ns_ + ": pause failed: " + pause.response.message;
+    return false;
+  }
+  adroit_msgs::Reset reset;
+  reset.request.qpos = qpos;
+  reset.request.pressure = pressure;
+  if (!reset_client_.call(reset) || !reset.response.success) {
+    error = "driver " + ns_ + ": reset refused: " + reset.response.message;
+    return false;
+  }
+  // One physics step on the hold command: afterwards the published state is the reset one.
+  return send(std::vector<double>(pressure.size(), hold_volts), error) && step(1, error);
+}
+
+bool DriverConnection::send(const std::vector<double>& volts, std::string& error) {
+  command_.index.resize(volts.size());
+  for (std::size_t i = 0; i < volts.size(); ++i) command_.index[i] = static_cast<std::uint16_t>(i);
+  command_.volts = volts;
+  command_.name.clear();
+  // Stamps only need to increase: the driver steps once a command at or after the stamp came.
+  ros::Time stamp = ros::Time::now();
+  if (stamp <= last_stamp_) stamp = last_stamp_ + ros::Duration(0, 1000);
+  last_stamp_ = stamp;
+  command_.header.stamp = stamp;
+  valve_pub_.publish(command_);
+  (void)error;
+  return true;
+}
+
+bool DriverConnection::step(int steps, std::string& error) {
+  adroit_msgs::Step srv;
+  srv.request.steps = static_cast<std::uint32_t>(steps);
+  srv.request.command_stamp = last_stamp_;
+  if (!step_client_.call(srv)) {
+    error = "driver " + ns_ + ": step service unavailable";
+    return false;
+  }
+  if (!srv.response.success) {
+    error = "driver " + ns_ + ": step failed: " + srv.response.message;
+    return false;
+  }
+  sim_time_ = ros::Time(srv.response.sim_time);
+  return safe(error);
+}
+
+bool DriverConnection::observe(const ros::Time& since, Observation& obs, std::string& error) {
+  const ros::Time min_stamp = since - ros::Duration(kStampSlack);
+  std::unique_lock<std::mutex> lock(mutex_);
+  const bool fresh = cv_.wait_for(lock, std::chrono::duration<double>(timeout_), [&] {
+    return joints_ && actuators_ && joints_->header.stamp >= min_stamp && actuators_->header.stamp >= min_stamp &&
+           (odom_sub_.getNumPublishers() == 0 || (odom_ && odom_->header.stamp >= min_stamp));
+  });
+  if (!fresh) {
+    error = "driver " + ns_ + ": no state stamped after " + std::to_string(since.toSec()) + " s within " +
+            std::to_string(timeout_) + " s";
+    return false;
+  }
+  obs.joint_position = joints_->position;
+  obs.joint_velocity = joints_->velocity;
+  obs.pressure = actuators_->pressure;
+  if (odom_) {
+    // Odometry carries both velocities in the object frame; the state, as the driver's
+    // signals, has the linear one in the world frame.
+    const auto& p = odom_->pose.pose;
+    const double quat[4] = {p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z};
+    const auto& v = odom_->twist.twist.linear;
+    const auto& w = odom_->twist.twist.angular;
+    double rot[9], linear_body[3] = {v.x, v.y, v.z}, linear_world[3];
+    mju_quat2Mat(rot, quat);
+    mju_rotVecMat(linear_world, linear_body, rot);
+    obs.object = {p.position.x, p.position.y, p.position.z, quat[0], quat[1], quat[2], quat[3],
+                  linear_world[0], linear_world[1], linear_world[2], w.x, w.y, w.z};
+  }
+  return true;
+}
+
+DriverRollouts::DriverRollouts(ros::NodeHandle& nh, const std::vector<std::string>& namespaces, const mjModel* model,
+                               double timeout)
+    : model_(model) {
+  for (const auto& ns : namespaces) drivers_.push_back(std::make_unique<DriverConnection>(nh, ns, timeout));
+  for (auto& d : drivers_) {
+    std::string error;
+    if (!d->waitForStreams(error)) throw std::runtime_error(error);
+    if (joints_.empty()) {
+      joints_ = d->jointNames();
+      cylinders_ = d->cylinderNames();
+    } else if (d->jointNames() != joints_ || d->cylinderNames() != cylinders_) {
+      throw std::runtime_error("driver " + d->ns() + " runs another robot than " + drivers_.front()->ns());
+    }
+  }
+  // The drivers must run the task's scene: every joint they report is in the model.
+  for (const auto& j : joints_)
+    if (mj_name2id(model_, mjOBJ_JOINT, j.c_str()) < 0)
+      throw std::runtime_error("driver " + drivers_.front()->ns() + " reports joint '" + j +
+                               "', which the task's scene does not have: start the driver with the task's scene");
+  if (static_cast<int>(cylinders_.size()) != model_->nu)
+    throw std::runtime_error("driver " + drivers_.front()->ns() + " has " + std::to_string(cylinders_.size()) +
+                             " cylinders, the task's scene " + std::to_string(model_->nu));
+  for (int j = 0; j < model_->njnt; ++j) has_object_ = has_object_ || model_->jnt_type[j] == mjJNT_FREE;
+}
+
+std::vector<double> DriverRollouts::jointRanges() const { return adroit::jointRanges(model_, joints_); }
+
+Eigen::VectorXd DriverRollouts::initialState(const TrainingTask& task, const StateLayout& layout) {
+  DriverConnection& d = *drivers_.front();
+  std::string error;
+  Observation obs;
+  if (!d.reset(initialQpos(model_, task, joints_, {}), std::vector<double>(cylinders_.size(), task.initial_pressure),
+               task.locked_command, error) ||
+      !d.observe(d.simTime(), obs, error))
+    throw std::runtime_error(error);
+  Eigen::VectorXd x(layout.nx());
+  layout.state(obs, x);
+  return x;
+}
+
+RolloutResult DriverRollouts::runOne(DriverConnection& d, const TrainingTask& task, const StateLayout& layout,
+                                     const LgController& controller, const RolloutRequest& request,
+                                     const std::atomic<bool>& cancel) {
+  RolloutResult failed;
+  if (!d.reset(initialQpos(model_, task, joints_, request.joint_offset),
+               std::vector<double>(cylinders_.size(), task.initial_pressure), task.locked_command, failed.error))
+    return failed;
+  const int substeps = static_cast<int>(std::lround(task.control_dt / model_->opt.timestep));
+  return runControlLoop(
+      layout, controller, request.noise, cancel,
+      [&](Observation& obs, std::string& error) { return d.observe(d.simTime(), obs, error); },
+      [&](const std::vector<double>& volts, std::string& error) { return d.send(volts, error); },
+      [&](std::string& error) { return d.step(substeps, error); });
+}
+
+std::vector<RolloutResult> DriverRollouts::run(const TrainingTask& task, const StateLayout& layout,
+                                               const LgController& controller,
+                                               const std::vector<RolloutRequest>& requests,
+                                               const std::atomic<bool>& cancel) {
+  std::vector<RolloutResult> results(requests.size());
+  // Driver k runs requests k, k + K, ...; one thread per driver.
+  std::vector<std::thread> threads;
+  for (std::size_t k = 0; k < drivers_.size(); ++k)
+    threads.emplace_back([&, k] {
+      for (std::size_t i = k; i < requests.size(); i += drivers_.size())
+        results[i] = runOne(*drivers_[k], task, layout, controller, requests[i], cancel);
+    });
+  for (auto& t : threads) t.join();
+  return results;
+}
+
+}  // namespace adroit::learning_node

@@ -1,0 +1,395 @@
+// adroit_learning trainer node: trajectory-centric RL jobs started with rosservice.
+//
+//   /adroit_learning/train           adroit_msgs/Train: starts a job, answers at once with its id
+//   /adroit_learning/status          adroit_msgs/TrainStatus
+//   /adroit_learning/cancel          std_srvs/Trigger
+//   /adroit_learning/execute_policy  adroit_msgs/ExecutePolicy: one rollout of a saved policy's mean
+//   /adroit_learning/progress        adroit_msgs/TrainProgress, one per iteration
+//
+// Private parameters: ~backend (driver | sim_workers), ~drivers (namespaces of the drivers
+// the driver backend uses, default [/adroit]), ~workers (sim_workers threads, 0 = cores),
+// ~tasks_dir, ~default_output_dir, ~smoothing_width (steps), ~timeout (s, a driver's answer),
+// ~plot (write learning_curve.png after every iteration).
+//
+// The job runs on its own thread; callbacks only read or set its shared state, so status and
+// cancel answer while rollouts run.
+#include <adroit_description/scenes.h>
+#include <adroit_learning/sim_rollouts.h>
+#include <adroit_learning/trainer.h>
+#include <adroit_msgs/ExecutePolicy.h>
+#include <adroit_msgs/Train.h>
+#include <adroit_msgs/TrainProgress.h>
+#include <adroit_msgs/TrainStatus.h>
+#include <adroit_ros/params.h>
+#include <ros/package.h>
+#include <ros/ros.h>
+#include <std_srvs/Trigger.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <adroit_core/mujoco_model.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cstring>
+#include <cmath>
+#include <ctime>
+#include <limits>
+#include <memory>
+#include <mutex>
+#include <thread>
+
+#include "driver_rollouts.h"
+
+namespace adroit::learning_node {
+
+namespace {
+
+bool makeDirectories(const std::string& path) {
+  for (std::size_t pos = 1; pos <= path.size(); ++pos) {
+    if (pos < path.size() && path[pos] != '/') continue;
+    const std::string prefix = path.substr(0, pos);
+    if (::mkdir(prefix.c_str(), 0755) != 0 && errno != EEXIST) return false;
+  }
+  return true;
+}
+
+// "" when `dir` exists (or can be made) and a file can be written in it, else why not.
+std::string writableDirectory(const std::string& dir) {
+  if (!makeDirectories(dir)) return "cannot create output directory '" + dir + "': " + std::strerror(errno);
+  const std::string probe = dir + "/.write_test";
+  FILE* f = std::fopen(probe.c_str(), "w");
+  if (!f) return "output directory '" + dir + "' is not writable: " + std::strerror(errno);
+  std::fclose(f);
+  std::remove(probe.c_str());
+  return "";
+}
+
+}  // namespace
+
+class TrainerNode {
+ public:
+  TrainerNode(ros::NodeHandle& nh, ros::NodeHandle& pnh) : nh_(nh) {
+    rosutil::Params params(pnh);
+    params.checkKeys("", {"backend", "drivers", "workers", "tasks_dir", "default_output_dir", "smoothing_width",
+                          "timeout", "plot"});
+    backend_ = params.string("backend", "driver");
+    if (backend_ != "driver" && backend_ != "sim_workers") params.fail("backend", "must be driver or sim_workers");
+    drivers_ = params.strings("drivers");
+    if (drivers_.empty()) drivers_ = {"/adroit"};
+    workers_ = params.integer("workers", 0, 0, 64);
+    tasks_dir_ = params.string("tasks_dir", ros::package::getPath("adroit_learning") + "/config/tasks");
+    if (trainingTaskNames(tasks_dir_).empty()) params.fail("tasks_dir", "no task files (*.yaml) in '" + tasks_dir_ + "'");
+    const char* home = std::getenv("ROS_HOME");
+    default_output_dir_ = params.string("default_output_dir", std::string(home ? home : "/tmp") + "/adroit_learning");
+    smoothing_width_ = params.number("smoothing_width", 1.0, 0.0, 100.0);
+    timeout_ = params.number("timeout", 5.0, 0.1, 600.0);
+    plot_ = params.boolean("plot", true);
+    plot_script_ = ros::package::getPath("adroit_learning") + "/scripts/plot_learning_curve.py";
+
+    ros::NodeHandle ln("adroit_learning");
+    progress_pub_ = ln.advertise<adroit_msgs::TrainProgress>("progress", 20);
+    services_.push_back(ln.advertiseService("train", &TrainerNode::onTrain, this));
+    services_.push_back(ln.advertiseService("status", &TrainerNode::onStatus, this));
+    services_.push_back(ln.advertiseService("cancel", &TrainerNode::onCancel, this));
+    services_.push_back(ln.advertiseService("execute_policy", &TrainerNode::onExecute, this));
+    ROS_INFO("adroit_learning: ready, backend %s, tasks in %s", backend_.c_str(), tasks_dir_.c_str());
+  }
+
+  ~TrainerNode() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (trainer_) trainer_->cancel();
+    }
+    if (job_.joinable()) job_.join();
+  }
+
+ private:
+  // The backend for a task: the task scene's model for qpos layout and ranges.
+  std::unique_ptr<RolloutBackend> makeBackend(const TrainingTask& task, const std::string& kind) {
+    const std::string share = ros::package::getPath("adroit_description");
+    const std::string model_path = description::sceneFile(share, task.scene, false);
+    if (kind == "sim_workers") {
+      driver::SimConfig config;
+      config.model_path = model_path;
+      config.mode = driver::ActuationMode::kPneumatic;
+      return std::make_unique<SimRollouts>(config, workers_);
+    }
+    model_ = loadModelFile(model_path).model;
+    return std::make_unique<DriverRollouts>(nh_, drivers_, model_.get(), timeout_);
+  }
+
+  bool busy() const { return state_ == "running" || executing_; }
+
+  bool onTrain(adroit_msgs::Train::Request& req, adroit_msgs::Train::Response& res) {
+    res.accepted = false;
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (busy()) {
+      res.message = "a job is running (" + job_id_ + "); cancel it first with /adroit_learning/cancel";
+      return true;
+    }
+    if (!req.demonstrations.empty()) {
+      res.message = "learning from demonstrations is not available yet; leave 'demonstrations' empty";
+      return true;
+    }
+    TrainingTask task;
+    try {
+      task = findTrainingTask(tasks_dir_, req.task);
+    } catch (const std::exception& e) {
+      res.message = e.what();
+      return true;
+    }
+    TrainerSettings settings;
+    settings.iterations = static_cast<int>(req.iterations);
+    settings.samples = req.rollouts == 0 ? 5 : static_cast<int>(req.rollouts);
+    settings.seed = req.seed != 0 ? req.seed : static_cast<std::uint64_t>(std::time(nullptr));
+    settings.noise_scale = req.noise_level == 0 ? 1.0 : req.noise_level;
+    settings.smoothing_width = req.smoothing_width == 0 ? smoothing_width_ : req.smoothing_width;
+    settings.initial_state_noise = req.initial_state_noise;
+    settings.initial_state_noise_from = static_cast<int>(req.initial_state_noise_from);
+    if (req.iterations == 0) {
+      res.message = "iterations must be positive";
+      return true;
+    }
+    const std::string bad = validate(settings);
+    if (!bad.empty()) {
+      res.message = bad;
+      return true;
+    }
+    char stamp[32];
+    const std::time_t now = std::time(nullptr);
+    std::strftime(stamp, sizeof(stamp), "%Y%m%d-%H%M%S", std::localtime(&now));
+    const std::string id = task.name + "-" + stamp + "-" + std::to_string(settings.seed);
+    settings.output_dir = req.output_dir.empty() ? default_output_dir_ + "/" + id : req.output_dir;
+    const std::string unwritable = writableDirectory(settings.output_dir);
+    if (!unwritable.empty()) {
+      res.message = unwritable;
+      return true;
+    }
+    if (job_.joinable()) job_.join();  // the previous job has ended (not busy)
+    job_id_ = id;
+    state_ = "running";
+    message_ = "starting";
+    iteration_ = 0;
+    iterations_ = settings.iterations;
+    mean_cost_ = best_cost_ = std::numeric_limits<double>::quiet_NaN();
+    success_rate_ = 0;
+    job_ = std::thread(&TrainerNode::runJob, this, task, settings, id);
+    res.accepted = true;
+    res.job_id = id;
+    res.message = "training " + task.name + " for " + std::to_string(settings.iterations) + " iterations x " +
+                  std::to_string(settings.samples) + " rollouts on backend " + backend_ + ", output in " +
+                  settings.output_dir;
+    return true;
+  }
+
+  void runJob(TrainingTask task, TrainerSettings settings, std::string id) {
+    try {
+      std::unique_ptr<RolloutBackend> backend = makeBackend(task, backend_);
+      auto trainer = std::make_shared<Trainer>(task, settings, *backend);
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        trainer_ = trainer;
+        if (cancel_requested_) trainer->cancel();
+      }
+      ROS_INFO("adroit_learning: job %s: %s, %d iterations x %d rollouts, state %d, actions %d, backend %s",
+               id.c_str(), task.name.c_str(), settings.iterations, settings.samples, trainer->layout().nx(),
+               trainer->layout().nu(), backend->name().c_str());
+      while (!trainer->finished() && !trainer->cancelled()) {
+        const IterationReport r = trainer->iterate();
+        publish(id, task, settings, r);
+        if (plot_) plot(settings.output_dir);
+      }
+      const bool cancelled = trainer->cancelled();
+      if (!cancelled) {
+        const std::string final_path = settings.output_dir + "/final.tvlg";
+        writePolicyFile(final_path, trainer->policyFile(trainer->controller(), trainer->iteration(),
+                                                        std::numeric_limits<double>::quiet_NaN()));
+      }
+      finish(cancelled ? "cancelled" : "finished",
+             cancelled ? "cancelled at iteration " + std::to_string(trainer->iteration())
+                       : "done; policies and learning_curve.csv in " + settings.output_dir);
+    } catch (const std::exception& e) {
+      ROS_ERROR("adroit_learning: job %s failed: %s", id.c_str(), e.what());
+      finish("failed", e.what());
+    }
+  }
+
+  void finish(const std::string& state, const std::string& message) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    state_ = state;
+    message_ = message;
+    trainer_.reset();
+    cancel_requested_ = false;
+    ROS_INFO("adroit_learning: job %s %s: %s", job_id_.c_str(), state.c_str(), message.c_str());
+  }
+
+  void publish(const std::string& id, const TrainingTask& task, const TrainerSettings& settings,
+               const IterationReport& r) {
+    adroit_msgs::TrainProgress m;
+    m.header.stamp = ros::Time::now();
+    m.job_id = id;
+    m.task = task.name;
+    m.iteration = r.iteration;
+    m.iterations = settings.iterations;
+    m.ok = r.ok;
+    m.message = r.message;
+    m.cost_mean = r.cost_mean;
+    m.cost_std = r.cost_std;
+    m.joint_rms_mean = r.joint_rms_mean;
+    m.successes = r.successes;
+    m.samples = r.samples;
+    m.kl = r.kl;
+    m.eta = r.eta;
+    m.epsilon = r.epsilon;
+    m.rollout_s = r.rollout_s;
+    m.gmm_s = r.gmm_s;
+    m.dynamics_s = r.dynamics_s;
+    m.cost_s = r.cost_s;
+    m.update_s = r.update_s;
+    m.policy_path = r.policy_path;
+    progress_pub_.publish(m);
+    if (r.ok)
+      ROS_INFO("adroit_learning: %s iteration %d/%d: cost %.4g +- %.3g, joint rms %.3f rad, %d/%d ok, KL %.3g "
+               "(eps %.3g, eta %.3g); rollouts %.2f s, GMM %.2f s, fit %.2f s, update %.2f s",
+               task.name.c_str(), r.iteration + 1, settings.iterations, r.cost_mean, r.cost_std, r.joint_rms_mean,
+               r.successes, r.samples, r.kl, r.epsilon, r.eta, r.rollout_s, r.gmm_s, r.dynamics_s, r.update_s);
+    else
+      ROS_WARN("adroit_learning: %s iteration %d/%d: %s", task.name.c_str(), r.iteration + 1, settings.iterations,
+               r.message.c_str());
+    std::lock_guard<std::mutex> lock(mutex_);
+    iteration_ = r.iteration + 1;
+    if (r.ok) {
+      mean_cost_ = r.cost_mean;
+      if (!(best_cost_ <= r.cost_mean)) best_cost_ = r.cost_mean;
+      success_rate_ = r.samples > 0 ? static_cast<double>(r.successes) / r.samples : 0.0;
+    }
+    message_ = r.ok ? "iteration " + std::to_string(r.iteration + 1) + " done" : r.message;
+  }
+
+  void plot(const std::string& dir) {
+    // Off the callback threads (this is the job's thread); a missing matplotlib only warns.
+    const std::string cmd = "/usr/bin/python3 '" + plot_script_ + "' '" + dir + "/learning_curve.csv' '" + dir +
+                            "/learning_curve.png' >/dev/null 2>&1";
+    if (std::system(cmd.c_str()) != 0) ROS_WARN_ONCE("adroit_learning: learning_curve.png not written (%s)", cmd.c_str());
+  }
+
+  bool onStatus(adroit_msgs::TrainStatus::Request&, adroit_msgs::TrainStatus::Response& res) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    res.state = state_;
+    res.job_id = job_id_;
+    res.iteration = iteration_;
+    res.iterations = iterations_;
+    res.mean_cost = mean_cost_;
+    res.best_cost = best_cost_;
+    res.success_rate = success_rate_;
+    res.message = message_;
+    return true;
+  }
+
+  bool onCancel(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (state_ != "running") {
+      res.success = false;
+      res.message = "no job is running";
+      return true;
+    }
+    cancel_requested_ = true;
+    if (trainer_) trainer_->cancel();
+    res.success = true;
+    res.message = "cancelling " + job_id_ + " (the current rollout stops at its next control step)";
+    return true;
+  }
+
+  bool onExecute(adroit_msgs::ExecutePolicy::Request& req, adroit_msgs::ExecutePolicy::Response& res) {
+    res.success = false;
+    res.final_cost = std::numeric_limits<double>::quiet_NaN();
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (busy()) {
+        res.message = "a job is running (" + job_id_ + "); the robot is busy";
+        return true;
+      }
+      executing_ = true;
+    }
+    try {
+      if (!req.policy_type.empty() && req.policy_type != "tvlg")
+        throw std::runtime_error("policy_type '" + req.policy_type + "' is not available; this trainer writes tvlg");
+      const PolicyFile policy = readPolicyFile(req.policy_path);
+      TrainingTask task = findTrainingTask(tasks_dir_, policy.task);
+      if (std::abs(task.control_dt - policy.control_dt) > 1e-12)
+        throw std::runtime_error(req.policy_path + ": control_dt " + std::to_string(policy.control_dt) +
+                                 " s, task '" + task.name + "' now has " + std::to_string(task.control_dt) + " s");
+      task.horizon = policy.controller.horizon();
+      if (req.duration > 0) task.horizon = std::min(task.horizon, static_cast<int>(std::ceil(req.duration / task.control_dt)));
+      std::unique_ptr<RolloutBackend> backend = makeBackend(task, "driver");  // always on the robot
+      const StateLayout layout(task, backend->jointNames(), backend->cylinderNames(), backend->hasObject());
+      const std::string mismatch = policyMismatch(policy, req.policy_path, layout.joint_names, layout.cylinder_names,
+                                                  layout.describe());
+      if (!mismatch.empty()) throw std::runtime_error(mismatch);
+      LgController controller = policy.controller;
+      if (task.horizon < controller.horizon()) {
+        LgController shorter(controller.nx(), controller.nu(), task.horizon);
+        for (int t = 0; t < task.horizon; ++t) {
+          shorter.K[t] = controller.K[t];
+          shorter.k[t] = controller.k[t];
+          shorter.setCovariance(t, controller.covariance(t));
+        }
+        controller = std::move(shorter);
+      }
+      const TrajectoryCost cost(task, layout, backend->initialState(task, layout));
+      const std::atomic<bool> no_cancel{false};
+      const RolloutRequest mean{Eigen::MatrixXd::Zero(layout.nu(), task.horizon), {}};
+      const std::vector<RolloutResult> results = backend->run(task, layout, controller, {mean}, no_cancel);
+      if (!results.front().ok) throw std::runtime_error("rollout failed: " + results.front().error);
+      const TaskOutcome outcome = cost.outcome(results.front().sample);
+      res.success = true;
+      res.final_cost = outcome.cost;
+      char text[200];
+      std::snprintf(text, sizeof(text), "ran %d steps of %s: cost %.4g, joint rms %.3f rad%s", task.horizon,
+                    task.name.c_str(), outcome.cost, outcome.joint_rms, outcome.success ? ", success" : "");
+      res.message = text;
+    } catch (const std::exception& e) {
+      res.message = e.what();
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    executing_ = false;
+    return true;
+  }
+
+  ros::NodeHandle nh_;
+  std::string backend_, tasks_dir_, default_output_dir_, plot_script_;
+  std::vector<std::string> drivers_;
+  int workers_ = 0;
+  double smoothing_width_ = 1.0, timeout_ = 5.0;
+  bool plot_ = true;
+  ModelPtr model_;
+  ros::Publisher progress_pub_;
+  std::vector<ros::ServiceServer> services_;
+
+  std::mutex mutex_;  // guards everything below
+  std::thread job_;
+  std::shared_ptr<Trainer> trainer_;
+  std::string state_ = "idle", job_id_, message_;
+  unsigned iteration_ = 0, iterations_ = 0;
+  double mean_cost_ = std::numeric_limits<double>::quiet_NaN(), best_cost_ = std::numeric_limits<double>::quiet_NaN();
+  double success_rate_ = 0;
+  bool cancel_requested_ = false, executing_ = false;
+};
+
+}  // namespace adroit::learning_node
+
+int main(int argc, char** argv) {
+  ros::init(argc, argv, "adroit_learning");
+  ros::NodeHandle nh, pnh("~");
+  try {
+    adroit::learning_node::TrainerNode node(nh, pnh);
+    ros::AsyncSpinner spinner(4);
+    spinner.start();
+    ros::waitForShutdown();
+  } catch (const adroit::rosutil::ParameterError& e) {
+    ROS_FATAL("%s", e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,150 @@
+#include "adroit_learning/sim_rollouts.h"
+
+#include <mujoco/mujoco.h>
+
+#include <algorithm>
+#include <cmath>
+#include <thread>
+
+namespace adroit {
+
+namespace {
+
+// As through the driver (DriverConnection::reset): one physics step on the hold command after
+// a reset, so the first observation is what the sensors report of the reset state.
+bool settle(driver::SimulatedRobot& robot, double hold_volts, std::string& error) {
+  const driver::CommandResult r =
+      robot.commandValves(robot.cylinderNames(), {}, std::vector<double>(robot.cylinderNames().size(), hold_volts));
+  if (!r.applied) {
+    error = "hold command refused: " + r.error;
+    return false;
+  }
+  robot.step();
+  return true;
+}
+
+int jointId(const mjModel* model, const std::string& name) {
+  const int j = mj_name2id(model, mjOBJ_JOINT, name.c_str());
+  if (j < 0) throw TaskError("joint '" + name + "' is not in the model");
+  return j;
+}
+
+}  // namespace
+
+std::vector<double> initialQpos(const mjModel* model, const TrainingTask& task, const std::vector<std::string>& joints,
+                                const std::vector<double>& joint_offset) {
+  std::vector<double> qpos(model->qpos0, model->qpos0 + model->nq);
+  if (!task.initial_keyframe.empty()) {
+    const int key = mj_name2id(model, mjOBJ_KEY, task.initial_keyframe.c_str());
+    if (key < 0) throw TaskError("task '" + task.name + "': initial_keyframe '" + task.initial_keyframe + "' is not in the model");
+    std::copy(model->key_qpos + key * model->nq, model->key_qpos + (key + 1) * model->nq, qpos.begin());
+  } else if (model->nkey > 0) {
+    std::copy(model->key_qpos, model->key_qpos + model->nq, qpos.begin());
+  }
+  for (const auto& [name, value] : task.initial_joints) qpos[model->jnt_qposadr[jointId(model, name)]] = value;
+  for (std::size_t i = 0; i < joints.size(); ++i) {
+    const int j = jointId(model, joints[i]);
+    double& q = qpos[model->jnt_qposadr[j]];
+    if (i < joint_offset.size()) q += joint_offset[i];
+    if (model->jnt_limited[j]) q = std::clamp(q, model->jnt_range[2 * j], model->jnt_range[2 * j + 1]);
+  }
+  return qpos;
+}
+
+std::vector<double> jointRanges(const mjModel* model, const std::vector<std::string>& joints) {
+  std::vector<double> out;
+  for (const auto& name : joints) {
+    const int j = jointId(model, name);
+    out.push_back(model->jnt_limited[j] ? model->jnt_range[2 * j + 1] - model->jnt_range[2 * j] : 0.0);
+  }
+  return out;
+}
+
+void observe(const driver::SimulatedRobot& robot, Observation& obs) {
+  const driver::Signals& s = robot.sensed();
+  obs.joint_position = s.joint_position;
+  obs.joint_velocity = s.joint_velocity;
+  obs.pressure = s.pressure;
+  obs.object = s.object;
+}
+
+SimRollouts::SimRollouts(const driver::SimConfig& config, int workers)
+    : pool_(workers > 0 ? static_cast<std::size_t>(workers) : std::max(1u, std::thread::hardware_concurrency())) {
+  for (std::size_t w = 0; w < pool_.size(); ++w) robots_.push_back(std::make_unique<driver::SimulatedRobot>(config));
+  start_ = robots_.front()->state();
+}
+
+std::vector<double> SimRollouts::jointRanges() const {
+  return adroit::jointRanges(robots_.front()->model(), jointNames());
+}
+
+Eigen::VectorXd SimRollouts::initialState(const TrainingTask& task, const StateLayout& layout) {
+  driver::SimulatedRobot& robot = *robots_.front();
+  robot.setState(start_);
+  std::string error;
+  const std::vector<double> qpos = initialQpos(robot.model(), task, layout.joint_names, {});
+  if (!robot.resetToState(qpos, {}, std::vector<double>(robot.cylinderNames().size(), task.initial_pressure), &error) ||
+      !settle(robot, task.locked_command, error))
+    throw TaskError("task '" + task.name + "': initial state refused: " + error);
+  Observation obs;
+  observe(robot, obs);
+  Eigen::VectorXd x(layout.nx());
+  layout.state(obs, x);
+  return x;
+}
+
+RolloutResult SimRollouts::runOne(int worker, const TrainingTask& task, const StateLayout& layout,
+                                  const LgController& controller, const RolloutRequest& request,
+                                  const std::atomic<bool>& cancel) {
+  driver::SimulatedRobot& robot = *robots_[worker];
+  RolloutResult failed;
+  if (robot.safety().safe_state && !robot.release(&failed.error)) {
+    failed.error = "robot stays in its safe state: " + failed.error;
+    return failed;
+  }
+  robot.setState(start_);
+  const std::vector<double> qpos = initialQpos(robot.model(), task, layout.joint_names, request.joint_offset);
+  if (!robot.resetToState(qpos, {}, std::vector<double>(layout.cylinder_names.size(), task.initial_pressure),
+                          &failed.error)) {
+    failed.error = "reset refused: " + failed.error;
+    return failed;
+  }
+  if (!settle(robot, task.locked_command, failed.error)) return failed;
+  const int substeps = static_cast<int>(std::lround(task.control_dt / robot.timestep()));
+  const std::vector<std::uint16_t> no_indices;
+  const std::vector<std::string>& names = robot.cylinderNames();
+  return runControlLoop(
+      layout, controller, request.noise, cancel,
+      [&](Observation& obs, std::string& error) {
+        if (robot.safety().safe_state) {
+          error = "the robot entered its safe state: " + robot.describe(robot.safetyEvents().last);
+          return false;
+        }
+        observe(robot, obs);
+        return true;
+      },
+      [&](const std::vector<double>& volts, std::string& error) {
+        const driver::CommandResult r = robot.commandValves(names, no_indices, volts);
+        if (!r.applied) error = "valve command refused: " + r.error;
+        return r.applied;
+      },
+      [&](std::string&) {
+        for (int k = 0; k < substeps; ++k) robot.step();
+        return true;
+      });
+}
+
+std::vector<RolloutResult> SimRollouts::run(const TrainingTask& task, const StateLayout& layout,
+                                            const LgController& controller, const std::vector<RolloutRequest>& requests,
+                                            const std::atomic<bool>& cancel) {
+  const double ratio = task.control_dt / robots_.front()->timestep();
+  if (std::abs(ratio - std::lround(ratio)) > 1e-9 || ratio < 1)
+    throw TaskError("task '" + task.name + "': control_dt must be a multiple of the physics step");
+  std::vector<RolloutResult> results(requests.size());
+  pool_.parallelForWorkers(requests.size(), [&](std::size_t i, std::size_t worker) {
+    results[i] = runOne(static_cast<int>(worker), task, layout, controller, requests[i], cancel);
+  });
+  return results;
+}
+
+}  // namespace adroit

@@ -17,6 +17,9 @@ namespace {
 // States of the last physics steps count as "after" a step ending at t: the actuator and
 // object streams run at every second physics step.
 constexpr double kStampSlack = 0.0045;
+// Physics steps after a reset, on the hold command: every stream has published the reset
+// state by then (SimRollouts settles the same way).
+constexpr int kSettleSteps = 2;
 
 }  // namespace
 
@@ -63,8 +66,36 @@ bool DriverConnection::safe(std::string& error) {
 }
 
 bool DriverConnection::waitForStreams(std::string& error) {
+  const auto have = [&] { return joints_ && actuators_; };
+  {
+    std::unique_lock<std::mutex> lock(mutex_);
+    if (cv_.wait_for(lock, std::chrono::duration<double>(std::min(timeout_, 1.0)), have)) return true;
+  }
+  // A paused (lockstep) driver publishes nothing until stepped: pause and step it once, with
+  // no command stamp (no command needed, and none arms its watchdog).
+  if (!step_client_.waitForExistence(ros::Duration(timeout_))) {
+    error = "driver " + ns_ + ": no step service within " + std::to_string(timeout_) + " s";
+    return false;
+  }
+  // What the step publishes is lost unless our subscriptions are connected first.
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(timeout_);
+  while (joints_sub_.getNumPublishers() == 0 || actuators_sub_.getNumPublishers() == 0) {
+    if (ros::WallTime::now() > deadline) {
+      error = "driver " + ns_ + ": joint_states / actuator_states have no publisher";
+      return false;
+    }
+    ros::WallDuration(0.01).sleep();
+  }
+  std_srvs::SetBool pause;
+  pause.request.data = true;
+  adroit_msgs::Step step;
+  step.request.steps = kSettleSteps;
+  if (!pause_client_.call(pause) || !step_client_.call(step) || !step.response.success) {
+    error = "driver " + ns_ + ": could not pause and step it: " + pause.response.message + " " + step.response.message;
+    return false;
+  }
   std::unique_lock<std::mutex> lock(mutex_);
-  if (cv_.wait_for(lock, std::chrono::duration<double>(timeout_), [&] { return joints_ && actuators_; })) return true;
+  if (cv_.wait_for(lock, std::chrono::duration<double>(timeout_), have)) return true;
   error = "driver " + ns_ + ": no joint_states / actuator_states within " + std::to_string(timeout_) + " s";
   return false;
 }
@@ -95,8 +126,10 @@ bool DriverConnection::reset(const std::vector<double>& qpos, const std::vector<
     error = "driver " + ns_ + ": reset refused: " + reset.response.message;
     return false;
   }
-  // One physics step on the hold command: afterwards the published state is the reset one.
-  return send(std::vector<double>(pressure.size(), hold_volts), error) && step(1, error);
+  // A few physics steps on the hold command: afterwards every stream shows the reset state,
+  // and nothing stamped before the reset counts as fresh.
+  reset_floor_ = sim_time_;
+  return send(std::vector<double>(pressure.size(), hold_volts), error) && step(kSettleSteps, error);
 }
 
 bool DriverConnection::send(const std::vector<double>& volts, std::string& error) {
@@ -131,7 +164,8 @@ bool DriverConnection::step(int steps, std::string& error) {
 }
 
 bool DriverConnection::observe(const ros::Time& since, Observation& obs, std::string& error) {
-  const ros::Time min_stamp = since - ros::Duration(kStampSlack);
+  ros::Time min_stamp = since - ros::Duration(kStampSlack);
+  if (min_stamp <= reset_floor_) min_stamp = reset_floor_ + ros::Duration(0, 1);
   std::unique_lock<std::mutex> lock(mutex_);
   const bool fresh = cv_.wait_for(lock, std::chrono::duration<double>(timeout_), [&] {
     return joints_ && actuators_ && joints_->header.stamp >= min_stamp && actuators_->header.stamp >= min_stamp &&
@@ -161,9 +195,9 @@ bool DriverConnection::observe(const ros::Time& since, Observation& obs, std::st
   return true;
 }
 
-DriverRollouts::DriverRollouts(ros::NodeHandle& nh, const std::vector<std::string>& namespaces, const mjModel* model,
+DriverRollouts::DriverRollouts(ros::NodeHandle& nh, const std::vector<std::string>& namespaces, ModelPtr model,
                                double timeout)
-    : model_(model) {
+    : model_(std::move(model)) {
   for (const auto& ns : namespaces) drivers_.push_back(std::make_unique<DriverConnection>(nh, ns, timeout));
   for (auto& d : drivers_) {
     std::string error;
@@ -177,7 +211,7 @@ DriverRollouts::DriverRollouts(ros::NodeHandle& nh, const std::vector<std::strin
   }
   // The drivers must run the task's scene: every joint they report is in the model.
   for (const auto& j : joints_)
-    if (mj_name2id(model_, mjOBJ_JOINT, j.c_str()) < 0)
+    if (mj_name2id(model_.get(), mjOBJ_JOINT, j.c_str()) < 0)
       throw std::runtime_error("driver " + drivers_.front()->ns() + " reports joint '" + j +
                                "', which the task's scene does not have: start the driver with the task's scene");
   if (static_cast<int>(cylinders_.size()) != model_->nu)
@@ -186,13 +220,13 @@ DriverRollouts::DriverRollouts(ros::NodeHandle& nh, const std::vector<std::strin
   for (int j = 0; j < model_->njnt; ++j) has_object_ = has_object_ || model_->jnt_type[j] == mjJNT_FREE;
 }
 
-std::vector<double> DriverRollouts::jointRanges() const { return adroit::jointRanges(model_, joints_); }
+std::vector<double> DriverRollouts::jointRanges() const { return adroit::jointRanges(model_.get(), joints_); }
 
 Eigen::VectorXd DriverRollouts::initialState(const TrainingTask& task, const StateLayout& layout) {
   DriverConnection& d = *drivers_.front();
   std::string error;
   Observation obs;
-  if (!d.reset(initialQpos(model_, task, joints_, {}), std::vector<double>(cylinders_.size(), task.initial_pressure),
+  if (!d.reset(initialQpos(model_.get(), task, joints_, {}), std::vector<double>(cylinders_.size(), task.initial_pressure),
                task.locked_command, error) ||
       !d.observe(d.simTime(), obs, error))
     throw std::runtime_error(error);
@@ -205,7 +239,7 @@ RolloutResult DriverRollouts::runOne(DriverConnection& d, const TrainingTask& ta
                                      const LgController& controller, const RolloutRequest& request,
                                      const std::atomic<bool>& cancel) {
   RolloutResult failed;
-  if (!d.reset(initialQpos(model_, task, joints_, request.joint_offset),
+  if (!d.reset(initialQpos(model_.get(), task, joints_, request.joint_offset),
                std::vector<double>(cylinders_.size(), task.initial_pressure), task.locked_command, failed.error))
     return failed;
   const int substeps = static_cast<int>(std::lround(task.control_dt / model_->opt.timestep));

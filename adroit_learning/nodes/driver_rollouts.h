@@ -8,6 +8,7 @@
 // run the requests in parallel, one connection per driver. The driver's safe state is never
 // released here: a rollout that meets it fails and says so.
 #pragma once
+#include <adroit_core/mujoco_model.h>
 #include <adroit_learning/rollout_backend.h>
 #include <adroit_msgs/ActuatorStates.h>
 #include <adroit_msgs/ValveCommand.h>
@@ -34,8 +35,8 @@ class DriverConnection {
   bool waitForStreams(std::string& error);
   std::vector<std::string> jointNames();
   std::vector<std::string> cylinderNames();
-  // Pause (lockstep stepping needs it), reset to qpos/pressure, then one physics step with
-  // every valve at `hold_volts` so the sensors report the reset state.
+  // Pause (lockstep stepping needs it), reset to qpos/pressure, then two physics steps with
+  // every valve at `hold_volts` so every sensor stream reports the reset state.
   bool reset(const std::vector<double>& qpos, const std::vector<double>& pressure, double hold_volts,
              std::string& error);
   // The newest observation stamped at or after `since` (waits up to the timeout).
@@ -63,7 +64,7 @@ class DriverConnection {
   adroit_msgs::ActuatorStates::ConstPtr actuators_;
   nav_msgs::Odometry::ConstPtr odom_;
   bool safe_state_ = false;
-  ros::Time sim_time_, last_stamp_;
+  ros::Time sim_time_, last_stamp_, reset_floor_;
   adroit_msgs::ValveCommand command_;
 };
 
@@ -71,8 +72,7 @@ class DriverRollouts : public RolloutBackend {
  public:
   // model: the task scene's MJCF (qpos layout for resets, joint ranges); namespaces: one per
   // driver. Throws std::runtime_error when a driver does not answer or runs another robot.
-  DriverRollouts(ros::NodeHandle& nh, const std::vector<std::string>& namespaces, const mjModel* model,
-                 double timeout);
+  DriverRollouts(ros::NodeHandle& nh, const std::vector<std::string>& namespaces, ModelPtr model, double timeout);
   std::string name() const override { return "driver"; }
   std::vector<std::string> jointNames() const override { return joints_; }
   std::vector<std::string> cylinderNames() const override { return cylinders_; }
@@ -85,7 +85,7 @@ class DriverRollouts : public RolloutBackend {
  private:
   RolloutResult runOne(DriverConnection& driver, const TrainingTask& task, const StateLayout& layout,
                        const LgController& controller, const RolloutRequest& request, const std::atomic<bool>& cancel);
-  const mjModel* model_;
+  ModelPtr model_;
   std::vector<std::unique_ptr<DriverConnection>> drivers_;
   std::vector<std::string> joints_, cylinders_;
   bool has_object_ = false;

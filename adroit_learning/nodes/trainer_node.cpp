@@ -115,8 +115,7 @@ class TrainerNode {
       config.mode = driver::ActuationMode::kPneumatic;
       return std::make_unique<SimRollouts>(config, workers_);
     }
-    model_ = loadModelFile(model_path).model;
-    return std::make_unique<DriverRollouts>(nh_, drivers_, model_.get(), timeout_);
+    return std::make_unique<DriverRollouts>(nh_, drivers_, loadModelFile(model_path).model, timeout_);
   }
 
   bool busy() const { return state_ == "running" || executing_; }
@@ -184,6 +183,7 @@ class TrainerNode {
   }
 
   void runJob(TrainingTask task, TrainerSettings settings, std::string id) {
+    std::string state = "failed", message;
     try {
       std::unique_ptr<RolloutBackend> backend = makeBackend(task, backend_);
       auto trainer = std::make_shared<Trainer>(task, settings, *backend);
@@ -200,19 +200,23 @@ class TrainerNode {
         publish(id, task, settings, r);
         if (plot_) plot(settings.output_dir);
       }
-      const bool cancelled = trainer->cancelled();
-      if (!cancelled) {
-        const std::string final_path = settings.output_dir + "/final.tvlg";
-        writePolicyFile(final_path, trainer->policyFile(trainer->controller(), trainer->iteration(),
-                                                        std::numeric_limits<double>::quiet_NaN()));
+      if (trainer->cancelled()) {
+        state = "cancelled";
+        message = "cancelled at iteration " + std::to_string(trainer->iteration());
+      } else {
+        writePolicyFile(settings.output_dir + "/final.tvlg",
+                        trainer->policyFile(trainer->controller(), trainer->iteration(),
+                                            std::numeric_limits<double>::quiet_NaN()));
+        state = "finished";
+        message = "done; policies and learning_curve.csv in " + settings.output_dir;
       }
-      finish(cancelled ? "cancelled" : "finished",
-             cancelled ? "cancelled at iteration " + std::to_string(trainer->iteration())
-                       : "done; policies and learning_curve.csv in " + settings.output_dir);
     } catch (const std::exception& e) {
       ROS_ERROR("adroit_learning: job %s failed: %s", id.c_str(), e.what());
-      finish("failed", e.what());
+      message = e.what();
     }
+    // Only now, with the backend gone (its subscriptions closed), may another job or an
+    // execute_policy call take the robot.
+    finish(state, message);
   }
 
   void finish(const std::string& state, const std::string& message) {
@@ -363,7 +367,6 @@ class TrainerNode {
   int workers_ = 0;
   double smoothing_width_ = 1.0, timeout_ = 5.0;
   bool plot_ = true;
-  ModelPtr model_;
   ros::Publisher progress_pub_;
   std::vector<ros::ServiceServer> services_;
 

@@ -10,7 +10,7 @@ namespace adroit {
 
 namespace {
 
-// As through the driver (DriverConnection::reset): one physics step on the hold command after
+// As through the driver (DriverConnection::reset): two physics steps on the hold command after
 // a reset, so the first observation is what the sensors report of the reset state.
 bool settle(driver::SimulatedRobot& robot, double hold_volts, std::string& error) {
   const driver::CommandResult r =
@@ -19,6 +19,7 @@ bool settle(driver::SimulatedRobot& robot, double hold_volts, std::string& error
     error = "hold command refused: " + r.error;
     return false;
   }
+  robot.step();
   robot.step();
   return true;
 }

@@ -85,17 +85,24 @@ void logJointFactored(const Gmm& gmm, const GmmFactors& factors, const Eigen::Ma
   }
 }
 
-// Column-wise log-sum-exp of lj (the log density of each point), and lj turned into the
-// responsibilities in place when `normalise`.
-double logSumExpColumns(Eigen::MatrixXd& lj, bool normalise) {
-  double total = 0;
+// Responsibilities below exp(-230) ~ 1e-100 count as exactly 0: they change no sum at double
+// precision, but in high dimensions (log-likelihood gaps of thousands between clusters) the
+// products they enter underflow into subnormal numbers, which x86 processes ~100x slower (the
+// M-step's rank update and fitDynamics' moment matching took 10-20x longer).
+constexpr double kLogNegligible = -230.0;
+
+// Column-wise log-sum-exp of the log-joint lj (the log density of each point), with lj turned
+// into the responsibilities in place.
+Eigen::VectorXd normaliseColumns(Eigen::MatrixXd& lj) {
+  Eigen::VectorXd log_density(lj.cols());
   for (Eigen::Index i = 0; i < lj.cols(); ++i) {
     const double m = lj.col(i).maxCoeff();
-    const double sum = (lj.col(i).array() - m).exp().sum();
-    total += m + std::log(sum);
-    if (normalise) lj.col(i) = (lj.col(i).array() - m).exp().matrix() / sum;
+    lj.col(i) = (lj.col(i).array() - m > kLogNegligible).select((lj.col(i).array() - m).exp(), 0.0).matrix();
+    const double sum = lj.col(i).sum();
+    log_density[i] = m + std::log(sum);
+    lj.col(i) /= sum;
   }
-  return total;
+  return log_density;
 }
 
 }  // namespace
@@ -109,22 +116,13 @@ Eigen::MatrixXd Gmm::logJoint(const Eigen::MatrixXd& points) const {
 }
 
 Eigen::VectorXd Gmm::logDensity(const Eigen::MatrixXd& points) const {
-  const Eigen::MatrixXd lj = logJoint(points);
-  Eigen::VectorXd out(points.cols());
-  for (Eigen::Index i = 0; i < lj.cols(); ++i) {
-    const double m = lj.col(i).maxCoeff();
-    out[i] = m + std::log((lj.col(i).array() - m).exp().sum());
-  }
-  return out;
+  Eigen::MatrixXd lj = logJoint(points);
+  return normaliseColumns(lj);
 }
 
 Eigen::MatrixXd Gmm::responsibilities(const Eigen::MatrixXd& points) const {
   Eigen::MatrixXd lj = logJoint(points);
-  for (Eigen::Index i = 0; i < lj.cols(); ++i) {
-    const double m = lj.col(i).maxCoeff();
-    lj.col(i) = (lj.col(i).array() - m).exp().matrix();
-    lj.col(i) /= lj.col(i).sum();
-  }
+  normaliseColumns(lj);
   return lj;
 }
 
@@ -212,15 +210,15 @@ double Gmm::fitOnce(const Eigen::MatrixXd& points, const GmmSettings& s, std::ui
   // parameters and the next E-step's responsibilities come from the same evaluation.
   GmmFactors factors;
   Eigen::MatrixXd lj, y;
-  const auto objective = [&](bool normalise) {
+  const auto objective = [&]() {
     factors.compute(covariances);
     logJointFactored(*this, factors, points, lj, y);
-    return logSumExpColumns(lj, normalise) - 0.5 * s.regularization * factors.traceOfInverses();
+    return normaliseColumns(lj).sum() - 0.5 * s.regularization * factors.traceOfInverses();
   };
-  history.assign(1, objective(true));
+  history.assign(1, objective());
   for (int it = 0; it < s.max_iterations; ++it) {
     maximise(lj);  // lj holds the responsibilities of the current parameters
-    history.push_back(objective(true));
+    history.push_back(objective());
     if (history.back() - history[history.size() - 2] < s.tolerance * static_cast<double>(n)) break;
   }
   return history.back();
@@ -259,7 +257,7 @@ LgDynamics fitDynamics(const std::vector<Rollout>& rollouts, const Gmm* prior, c
     if (prior) {
       // Step t's prior: the mixture moment-matched with the points' mean responsibilities.
       logJointFactored(*prior, prior_factors, z, lj, scratch);
-      logSumExpColumns(lj, true);
+      normaliseColumns(lj);
       const Eigen::VectorXd w = lj.rowwise().mean();
       mu0.setZero();
       for (int k = 0; k < prior->clusters(); ++k) mu0 += w[k] * prior->means[k];

@@ -105,6 +105,26 @@ TEST(Gmm, EmNeverDecreasesTheObjective) {
   }
 }
 
+TEST(Gmm, NegligibleResponsibilitiesAreZeroNotSubnormal) {
+  // Two unit-variance clusters 1440^0.5 apart in 1-D: at z = 0 the far cluster's log
+  // responsibility is -720, whose exp is subnormal (x86 computes with those ~100x slower).
+  const double far = std::sqrt(1440.0);
+  Gmm gmm;
+  gmm.weights = {0.5, 0.5};
+  gmm.means = {VectorXd::Zero(1), VectorXd::Constant(1, far)};
+  gmm.covariances = {MatrixXd::Identity(1, 1), MatrixXd::Identity(1, 1)};
+  // At z(1) the first cluster's log responsibility ratio is -100: tiny but kept.
+  MatrixXd z(1, 2);
+  z << 0.0, 0.5 * far + 100.0 / far;
+  const MatrixXd r = gmm.responsibilities(z);
+  EXPECT_EQ(r(1, 0), 0.0);
+  EXPECT_EQ(r(0, 0), 1.0);
+  EXPECT_NEAR(r(0, 1) / std::exp(-100.0), 1.0, 1e-9);
+  for (Eigen::Index i = 0; i < r.size(); ++i) EXPECT_NE(std::fpclassify(r(i)), FP_SUBNORMAL) << i;
+  // The log density is unchanged: log(0.5 N(0; 0, 1)).
+  EXPECT_NEAR(gmm.logDensity(z)[0], std::log(0.5) - 0.5 * std::log(2 * M_PI), 1e-14);
+}
+
 TEST(DynamicsFit, RecoversAKnownSystemFromManySamples) {
   std::mt19937 rng(2);
   const TrueSystem sys(rng, 3, 2, 4, 0.1, 0.05, false);

@@ -167,11 +167,15 @@ double Gmm::fitOnce(const Eigen::MatrixXd& points, const GmmSettings& s, std::ui
       weights[k] = r.row(k).sum() / static_cast<double>(n);
       means[k] = points * r.row(k).transpose() / nk;
       // Weighted scatter sum_i r_ki (z_i - mu_k)(z_i - mu_k)' as one symmetric rank update
-      // of the columns scaled by sqrt(r_ki) (half the work of the general product).
-      scaled = (points.colwise() - means[k]) * r.row(k).cwiseMax(0.0).cwiseSqrt().asDiagonal();
+      // of the columns scaled by sqrt(r_ki) (half the work of the general product), over the
+      // points with r_ki > 0 only: in high dimensions responsibilities are nearly hard, so
+      // that is about 1/K of them.
+      Eigen::Index members = 0;
+      for (Eigen::Index i = 0; i < n; ++i)
+        if (r(k, i) > 0) scaled.col(members++) = std::sqrt(r(k, i)) * (points.col(i) - means[k]);
       Eigen::MatrixXd& S = covariances[k];
       S.setZero();
-      S.selfadjointView<Eigen::Lower>().rankUpdate(scaled);
+      S.selfadjointView<Eigen::Lower>().rankUpdate(scaled.leftCols(members));
       S.diagonal().array() += s.regularization;
       S /= nk;
       S.triangularView<Eigen::StrictlyUpper>() = S.transpose();

@@ -281,7 +281,16 @@ KlUpdateResult KlUpdate::update(const LgDynamics& dyn, const QuadraticCost& cost
   loadDynamics(dyn);
   loadPrevious(prev);
   double lo = 0, hi = std::numeric_limits<double>::infinity();
+  double log_kl_lo = std::numeric_limits<double>::infinity(), log_kl_hi = 0;
   double eta = std::min(std::max(s.eta_init, s.eta_min), s.eta_max);
+  // The secant of log KL over log eta (KL is close to a power law over a decade or two, slope
+  // -2 for large eta, flatter below): extrapolates toward the band until it is bracketed,
+  // then interpolates inside the bracket. Previous finite evaluation: for the slope.
+  const double log_epsilon = std::log(epsilon);
+  double last_log_eta = 0, last_log_kl = 0;
+  bool have_last_point = false;
+  int same_end_moves = 0;  // consecutive evaluations that moved the same end (lo or hi)
+  bool last_moved_lo = false;
   // Fallbacks when the band is not reached: the last controller inside the constraint, else
   // the last one solved at all.
   KlUpdateResult current, best, last;
@@ -294,6 +303,7 @@ KlUpdateResult KlUpdate::update(const LgDynamics& dyn, const QuadraticCost& cost
       kl = klDivergence(current.controller, prev, marginals_);
       if (!std::isfinite(kl)) kl = std::numeric_limits<double>::infinity();
     }
+    const double log_eta = std::log(eta), log_kl = std::log(std::max(kl, 1e-300));
     if (std::isfinite(kl)) {
       current.eta = eta;
       current.kl = kl;
@@ -312,19 +322,46 @@ KlUpdateResult KlUpdate::update(const LgDynamics& dyn, const QuadraticCost& cost
       last = current;
       have_last = true;
     }
-    if (kl < epsilon) {
-      hi = eta;
-    } else {
+    const bool moved_lo = !(kl < epsilon);
+    if (moved_lo) {
       lo = eta;
+      log_kl_lo = log_kl;
       if (eta >= s.eta_max) break;  // even the largest eta moves too far (or fails)
+    } else {
+      hi = eta;
+      log_kl_hi = log_kl;
     }
-    // Next eta: geometric bisection once bracketed, else steps of 10 toward the bracket.
-    if (lo > 0 && std::isfinite(hi))
-      eta = std::sqrt(lo * hi);
-    else if (lo > 0)
-      eta = std::min(lo * 10.0, s.eta_max);
-    else
-      eta = std::max(hi / 10.0, s.eta_min);
+    same_end_moves = moved_lo == last_moved_lo ? same_end_moves + 1 : 1;
+    last_moved_lo = moved_lo;
+    // Slope of log KL over log eta through the last two finite evaluations (-1 before
+    // there are two), kept negative and within [-4, -0.25] against noise and flat stretches.
+    double slope = -1.0;
+    if (std::isfinite(kl) && have_last_point && log_eta != last_log_eta)
+      slope = std::min(-0.25, std::max(-4.0, (log_kl - last_log_kl) / (log_eta - last_log_eta)));
+    if (std::isfinite(kl)) {
+      last_log_eta = log_eta;
+      last_log_kl = log_kl;
+      have_last_point = true;
+    }
+    if (lo > 0 && std::isfinite(hi)) {
+      const double log_lo = std::log(lo), log_hi = std::log(hi), width = log_hi - log_lo;
+      // Bracketed: interpolate between its ends (regula falsi in log-log), kept off the ends;
+      // geometric bisection when lo's solve failed, or when the same end moved three times
+      // in a row (regula falsi then converges slowly).
+      double next = 0.5 * (log_lo + log_hi);
+      if (std::isfinite(log_kl_lo) && same_end_moves < 3) {
+        next = log_lo + (log_epsilon - log_kl_lo) * width / (log_kl_hi - log_kl_lo);
+        next = std::min(std::max(next, log_lo + 0.05 * width), log_hi - 0.05 * width);
+      }
+      eta = std::exp(next);
+    } else if (lo > 0) {
+      // KL above the band at every eta so far: larger eta, by the secant when lo was solved
+      // (at most 100x per step), by 10x after a failed solve.
+      const double factor = std::isfinite(log_kl_lo) ? std::exp((log_epsilon - log_kl_lo) / slope) : 10.0;
+      eta = std::min(lo * std::min(factor, 100.0), s.eta_max);
+    } else {
+      eta = std::max(hi * std::max(std::exp((log_epsilon - log_kl_hi) / slope), 0.01), s.eta_min);
+    }
   }
   if (have_best) return best;  // not converged, but inside the constraint
   if (have_last) return last;  // not converged: KL above epsilon even at the largest eta tried

@@ -1,7 +1,7 @@
 // The KL-constrained update on random linear-Gaussian problems: the plain LQR equals the
 // textbook Riccati recursion with affine terms (computed here, without the augmented state);
 // the marginals and expected cost match Monte Carlo; the dual descent lands in the KL band
-// (or is slack at eta_min); KL(p || p) = 0 and the KL grows with epsilon; indefinite costs
+// (or is slack at eta_min) in few evaluations; KL(p || p) = 0 and the KL grows with epsilon; indefinite costs
 // fall back to a larger eta; the step-size rule.
 #include <gtest/gtest.h>
 
@@ -192,6 +192,35 @@ TEST(KlUpdate, DualDescentLandsInTheKlBandOnRandomProblems) {
       EXPECT_NEAR(expectedCost(cost, m), r.predicted_cost, 1e-9 * (1 + std::abs(r.predicted_cost)));
     }
   }
+}
+
+TEST(KlUpdate, DualDescentNeedsFewEvaluations) {
+  // The secant of log KL over log eta: few evaluations from eta_init = 1, fewer still warm
+  // started from the eta of the last update (epsilon changed by the step-size rule). Geometric
+  // bisection took 5.9 and 5.0 on average here, the secant 3.2 and 2.7.
+  int cold = 0, warm = 0, cases = 0;
+  for (unsigned seed = 10; seed < 30; ++seed) {
+    std::mt19937 rng(seed);
+    const int nx = 2 + seed % 5, nu = 1 + seed % 3, T = 5 + 3 * (seed % 4);
+    const LgDynamics dyn = randomDynamics(rng, nx, nu, T);
+    const QuadraticCost cost = randomCost(rng, nx, nu, T);
+    const LgController prev = initialController(nx, nu, T);
+    KlUpdate update(nx, nu, T);
+    for (double epsilon : {0.05, 0.5, 3.0}) {
+      const KlUpdateResult first = update.update(dyn, cost, prev, epsilon);
+      KlUpdateSettings settings;
+      settings.eta_init = first.eta;
+      const KlUpdateResult next = update.update(dyn, cost, prev, 1.7 * epsilon, settings);
+      ASSERT_TRUE(first.converged && next.converged) << "seed " << seed << " epsilon " << epsilon;
+      cold += first.iterations;
+      warm += next.iterations;
+      ++cases;
+    }
+  }
+  std::cout << "evaluations per update: from eta 1 " << double(cold) / cases << ", warm started "
+            << double(warm) / cases << "\n";
+  EXPECT_LE(cold, 4 * cases);
+  EXPECT_LE(2 * warm, 7 * cases);
 }
 
 TEST(KlUpdate, KlGrowsAndPredictedCostFallsWithEpsilon) {

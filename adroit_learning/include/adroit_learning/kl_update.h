@@ -8,9 +8,9 @@
 // adroit_core's BackwardPass (the same backward pass as the behaviour MPC) in absolute
 // coordinates: the affine dynamics term f_t enters through a constant state entry,
 // x~ = [x; 1], so the pass sees purely linear dynamics and the affine cost terms are its
-// linear terms. The new controller is u ~ N(K x + k, Quu^-1). eta is found by bisection in
-// log space on the KL of the resulting trajectory distribution (forward pass of the
-// state-action marginals under the fitted dynamics).
+// linear terms. The new controller is u ~ N(K x + k, Quu^-1). eta is found by a safeguarded
+// secant of log KL over log eta, the KL of the resulting trajectory distribution coming from
+// a forward pass of the state-action marginals under the fitted dynamics.
 #pragma once
 
 #include <adroit_core/lq_backward_pass.h>
@@ -89,7 +89,9 @@ class KlUpdate {
   bool solve(const LgDynamics& dyn, const QuadraticCost& cost, const LgController* prev, double eta,
              LgController& out);
 
-  // Dual descent on eta. Throws std::runtime_error when no eta up to eta_max gives a
+  // Dual descent on eta: from eta_init, secant steps in log-log (at most 100x, 10x after a
+  // failed solve) until the band is bracketed, then regula falsi in log-log with bisection as
+  // the fallback. Throws std::runtime_error when no eta up to eta_max gives a
   // positive definite Q_uu, std::invalid_argument for inconsistent sizes or epsilon <= 0.
   KlUpdateResult update(const LgDynamics& dyn, const QuadraticCost& cost, const LgController& prev, double epsilon,
                         const KlUpdateSettings& settings = {});

@@ -44,45 +44,48 @@ namespace {
 
 // Cholesky factors of a mixture's covariances and their log-determinants, computed once and
 // shared by every evaluation that needs them (EM's E-step and objective, the per-step prior
-// of fitDynamics).
+// of fitDynamics). `pool`: the clusters on its workers.
 struct GmmFactors {
   std::vector<Eigen::LLT<Eigen::MatrixXd>> llt;
   std::vector<double> log_det;
 
-  void compute(const std::vector<Eigen::MatrixXd>& covariances) {
+  void compute(const std::vector<Eigen::MatrixXd>& covariances, ThreadPool* pool) {
     llt.resize(covariances.size());
     log_det.resize(covariances.size());
-    for (size_t k = 0; k < covariances.size(); ++k) {
+    forEachIndex(pool, covariances.size(), [&](std::size_t k, std::size_t) {
       llt[k].compute(covariances[k]);
       if (llt[k].info() != Eigen::Success) throw std::runtime_error("Gmm: a covariance is not positive definite");
       log_det[k] = 2.0 * llt[k].matrixLLT().diagonal().array().log().sum();
-    }
+    });
   }
-  // sum_k tr(S_k^-1) = sum_k |L_k^-1|_F^2.
-  double traceOfInverses() const {
+  // sum_k tr(S_k^-1) = sum_k |L_k^-1|_F^2 (summed in cluster order: the same with any pool).
+  double traceOfInverses(ThreadPool* pool) const {
+    std::vector<double> traces(llt.size());
+    forEachIndex(pool, llt.size(), [&](std::size_t k, std::size_t) {
+      Eigen::MatrixXd inv = Eigen::MatrixXd::Identity(llt[k].rows(), llt[k].cols());
+      llt[k].matrixL().solveInPlace(inv);
+      traces[k] = inv.squaredNorm();
+    });
     double total = 0;
-    for (const auto& f : llt) {
-      Eigen::MatrixXd inv = Eigen::MatrixXd::Identity(f.rows(), f.cols());
-      f.matrixL().solveInPlace(inv);
-      total += inv.squaredNorm();
-    }
+    for (double t : traces) total += t;
     return total;
   }
 };
 
-// log w_k + log N(z; mu_k, S_k) (clusters x points) into `out`; y: scratch.
+// log w_k + log N(z; mu_k, S_k) (clusters x points) into `out`; y: one scratch matrix per
+// worker of `pool` (clusters on its workers).
 void logJointFactored(const Gmm& gmm, const GmmFactors& factors, const Eigen::MatrixXd& points, Eigen::MatrixXd& out,
-                      Eigen::MatrixXd& y) {
-  const int K = gmm.clusters();
-  out.resize(K, points.cols());
-  for (int k = 0; k < K; ++k) {
-    y = points.colwise() - gmm.means[k];
-    factors.llt[k].matrixL().solveInPlace(y);
+                      std::vector<Eigen::MatrixXd>& y, ThreadPool* pool) {
+  out.resize(gmm.clusters(), points.cols());
+  forEachIndex(pool, gmm.clusters(), [&](std::size_t k, std::size_t worker) {
+    Eigen::MatrixXd& yk = y[worker];
+    yk = points.colwise() - gmm.means[k];
+    factors.llt[k].matrixL().solveInPlace(yk);
     const double log_w =
         gmm.weights[k] > 0 ? std::log(gmm.weights[k]) : -std::numeric_limits<double>::infinity();
     out.row(k) =
-        (-0.5 * (y.colwise().squaredNorm().array() + factors.log_det[k] + points.rows() * kLog2Pi) + log_w).matrix();
-  }
+        (-0.5 * (yk.colwise().squaredNorm().array() + factors.log_det[k] + points.rows() * kLog2Pi) + log_w).matrix();
+  });
 }
 
 // Responsibilities below exp(-230) ~ 1e-100 count as exactly 0: they change no sum at double
@@ -109,9 +112,10 @@ Eigen::VectorXd normaliseColumns(Eigen::MatrixXd& lj) {
 
 Eigen::MatrixXd Gmm::logJoint(const Eigen::MatrixXd& points) const {
   GmmFactors factors;
-  factors.compute(covariances);
-  Eigen::MatrixXd out, y;
-  logJointFactored(*this, factors, points, out, y);
+  factors.compute(covariances, nullptr);
+  Eigen::MatrixXd out;
+  std::vector<Eigen::MatrixXd> y(1);
+  logJointFactored(*this, factors, points, out, y, nullptr);
   return out;
 }
 
@@ -158,11 +162,13 @@ double Gmm::fitOnce(const Eigen::MatrixXd& points, const GmmSettings& s, std::ui
                     std::vector<double>& history) {
   const Eigen::Index n = points.cols(), d = points.rows();
   const int K = s.clusters;
-  Eigen::MatrixXd scaled(d, n);
+  // One d x n scratch matrix per worker: the E-step's whitened points, the M-step's scaled ones.
+  std::vector<Eigen::MatrixXd> scratch(workerCount(s.pool), Eigen::MatrixXd(d, n));
 
-  // M-step for responsibilities r (clusters x points).
+  // M-step for responsibilities r (clusters x points), the clusters on the pool's workers.
   const auto maximise = [&](const Eigen::MatrixXd& r) {
-    for (int k = 0; k < K; ++k) {
+    forEachIndex(s.pool, K, [&](std::size_t k, std::size_t worker) {
+      Eigen::MatrixXd& scaled = scratch[worker];
       const double nk = std::max(r.row(k).sum(), 1e-12);
       weights[k] = r.row(k).sum() / static_cast<double>(n);
       means[k] = points * r.row(k).transpose() / nk;
@@ -179,7 +185,7 @@ double Gmm::fitOnce(const Eigen::MatrixXd& points, const GmmSettings& s, std::ui
       S.diagonal().array() += s.regularization;
       S /= nk;
       S.triangularView<Eigen::StrictlyUpper>() = S.transpose();
-    }
+    });
   };
 
   // Start: seeds by D^2 sampling (k-means++: each next seed is a point drawn with probability
@@ -213,11 +219,11 @@ double Gmm::fitOnce(const Eigen::MatrixXd& points, const GmmSettings& s, std::ui
   // One factorisation and one log-joint per iteration: the objective of the current
   // parameters and the next E-step's responsibilities come from the same evaluation.
   GmmFactors factors;
-  Eigen::MatrixXd lj, y;
+  Eigen::MatrixXd lj;
   const auto objective = [&]() {
-    factors.compute(covariances);
-    logJointFactored(*this, factors, points, lj, y);
-    return normaliseColumns(lj).sum() - 0.5 * s.regularization * factors.traceOfInverses();
+    factors.compute(covariances, s.pool);
+    logJointFactored(*this, factors, points, lj, scratch, s.pool);
+    return normaliseColumns(lj).sum() - 0.5 * s.regularization * factors.traceOfInverses(s.pool);
   };
   history.assign(1, objective());
   for (int it = 0; it < s.max_iterations; ++it) {
@@ -249,45 +255,51 @@ LgDynamics fitDynamics(const std::vector<Rollout>& rollouts, const Gmm* prior, c
   dyn.x0_cov.diagonal().array() += s.regularization;
 
   GmmFactors prior_factors;  // the prior's Cholesky factors, once for all steps
-  if (prior) prior_factors.compute(prior->covariances);
-  Eigen::MatrixXd lj, scratch;
-  Eigen::MatrixXd z(d, rollouts.size()), S, S0(d, d), Fxu_t(nxu, nx);
-  Eigen::VectorXd mu, mu0(d), diff(d);
-  Eigen::LLT<Eigen::MatrixXd> llt;
-  for (int t = 0; t < T; ++t) {
+  if (prior) prior_factors.compute(prior->covariances, s.pool);
+  // The steps are independent: on the pool's workers, each with its own scratch.
+  struct Scratch {
+    std::vector<Eigen::MatrixXd> whitened{1};
+    Eigen::MatrixXd lj, z, S, S0, Szz, Fxu_t, sigma;
+    Eigen::VectorXd mu, mu0, diff;
+    Eigen::LLT<Eigen::MatrixXd> llt;
+  };
+  std::vector<Scratch> scratch(workerCount(s.pool));
+  forEachIndex(s.pool, T, [&](std::size_t step, std::size_t worker) {
+    const int t = static_cast<int>(step);
+    Scratch& w = scratch[worker];
+    w.z.resize(d, rollouts.size());
     for (size_t i = 0; i < rollouts.size(); ++i)
-      z.col(i) << rollouts[i].x.col(t), rollouts[i].u.col(t), rollouts[i].x.col(t + 1);
-    moments(z, mu, S);
+      w.z.col(i) << rollouts[i].x.col(t), rollouts[i].u.col(t), rollouts[i].x.col(t + 1);
+    moments(w.z, w.mu, w.S);
     if (prior) {
       // Step t's prior: the mixture moment-matched with the points' mean responsibilities.
-      logJointFactored(*prior, prior_factors, z, lj, scratch);
-      normaliseColumns(lj);
-      const Eigen::VectorXd w = lj.rowwise().mean();
-      mu0.setZero();
-      for (int k = 0; k < prior->clusters(); ++k) mu0 += w[k] * prior->means[k];
-      S0.setZero();
+      logJointFactored(*prior, prior_factors, w.z, w.lj, w.whitened, nullptr);
+      normaliseColumns(w.lj);
+      const Eigen::VectorXd weight = w.lj.rowwise().mean();
+      w.mu0.setZero(d);
+      for (int k = 0; k < prior->clusters(); ++k) w.mu0 += weight[k] * prior->means[k];
+      w.S0.setZero(d, d);
       for (int k = 0; k < prior->clusters(); ++k) {
-        diff = prior->means[k] - mu0;
-        S0 += w[k] * (prior->covariances[k] + diff * diff.transpose());
+        w.diff = prior->means[k] - w.mu0;
+        w.S0 += weight[k] * (prior->covariances[k] + w.diff * w.diff.transpose());
       }
-      diff = mu - mu0;
-      S = (n0 * S0 + N * S + (N * m / (N + m)) * diff * diff.transpose()) / (N + n0);
-      mu = (m * mu0 + N * mu) / (m + N);
+      w.diff = w.mu - w.mu0;
+      w.S = (n0 * w.S0 + N * w.S + (N * m / (N + m)) * w.diff * w.diff.transpose()) / (N + n0);
+      w.mu = (m * w.mu0 + N * w.mu) / (m + N);
     }
     // Condition the joint Gaussian on (x, u): F = S_x'z S_zz^-1.
-    Eigen::MatrixXd Szz = S.topLeftCorner(nxu, nxu);
-    Szz.diagonal().array() += s.regularization;
-    llt.compute(Szz);
-    if (llt.info() != Eigen::Success) throw std::runtime_error("fitDynamics: (x, u) covariance not positive definite");
-    Fxu_t = llt.solve(S.bottomLeftCorner(nx, nxu).transpose());  // (nxu x nx) = F'
-    dyn.Fx[t] = Fxu_t.topRows(nx).transpose();
-    dyn.Fu[t] = Fxu_t.bottomRows(nu).transpose();
-    dyn.f[t] = mu.tail(nx) - dyn.Fx[t] * mu.head(nx) - dyn.Fu[t] * mu.segment(nx, nu);
-    Eigen::MatrixXd sigma = S.bottomRightCorner(nx, nx) - S.bottomLeftCorner(nx, nxu) * Fxu_t;
-    sigma = 0.5 * (sigma + sigma.transpose());
-    sigma.diagonal().array() += s.regularization;
-    dyn.Sigma[t] = sigma;
-  }
+    w.Szz = w.S.topLeftCorner(nxu, nxu);
+    w.Szz.diagonal().array() += s.regularization;
+    w.llt.compute(w.Szz);
+    if (w.llt.info() != Eigen::Success) throw std::runtime_error("fitDynamics: (x, u) covariance not positive definite");
+    w.Fxu_t = w.llt.solve(w.S.bottomLeftCorner(nx, nxu).transpose());  // (nxu x nx) = F'
+    dyn.Fx[t] = w.Fxu_t.topRows(nx).transpose();
+    dyn.Fu[t] = w.Fxu_t.bottomRows(nu).transpose();
+    dyn.f[t] = w.mu.tail(nx) - dyn.Fx[t] * w.mu.head(nx) - dyn.Fu[t] * w.mu.segment(nx, nu);
+    w.sigma = w.S.bottomRightCorner(nx, nx) - w.S.bottomLeftCorner(nx, nxu) * w.Fxu_t;
+    dyn.Sigma[t] = 0.5 * (w.sigma + w.sigma.transpose());
+    dyn.Sigma[t].diagonal().array() += s.regularization;
+  });
   return dyn;
 }
 

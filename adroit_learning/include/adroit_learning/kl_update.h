@@ -14,12 +14,27 @@
 #pragma once
 
 #include <adroit_core/lq_backward_pass.h>
+#include <adroit_core/thread_pool.h>
 #include <adroit_learning/lg_controller.h>
 
 #include <Eigen/Dense>
+#include <cstddef>
 #include <vector>
 
 namespace adroit {
+
+// The learning code's optional parallelism: body(i, worker) for i in [0, n) on the pool's
+// workers, or in order on this thread (worker 0) without a pool. Results are the same either
+// way (every index writes only its own outputs and its worker's scratch).
+inline std::size_t workerCount(const ThreadPool* pool) { return pool ? pool->size() : 1; }
+template <typename Body>
+void forEachIndex(ThreadPool* pool, std::size_t n, Body&& body) {
+  if (pool) {
+    pool->parallelForWorkers(n, body);
+  } else {
+    for (std::size_t i = 0; i < n; ++i) body(i, std::size_t{0});
+  }
+}
 
 // x_{t+1} ~ N(Fx_t x_t + Fu_t u_t + f_t, Sigma_t), t = 0..T-1;  x_0 ~ N(x0_mean, x0_cov).
 struct LgDynamics {

@@ -302,7 +302,7 @@ int main(int argc, char** argv) {
   adroit::KlUpdateSettings kl_settings;
   adroit::GmmSettings gmm_settings;
   adroit::DynamicsFitSettings dynamics_settings;
-  gmm_settings.pool = dynamics_settings.pool = pool.get();
+  gmm_settings.pool = dynamics_settings.pool = kl_settings.pool = pool.get();
   adroit::Gmm gmm;
   QuadraticCost cost;
   std::vector<IterationRecord> records;
@@ -342,7 +342,7 @@ int main(int argc, char** argv) {
 
       sw.restart();
       adroit::TrajectoryMarginals old_marginals;
-      adroit::forwardMarginals(dyn, controller, old_marginals);
+      adroit::forwardMarginals(dyn, controller, old_marginals, pool.get());
       previous_expected = adroit::expectedCost(cost, old_marginals);
       const adroit::KlUpdateResult res = kl_update.update(dyn, cost, controller, epsilon, kl_settings);
       rec.kl = sw.elapsed();

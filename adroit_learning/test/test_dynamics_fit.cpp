@@ -1,7 +1,8 @@
 // Dynamics fitting: EM never decreases its (penalised) log-likelihood, also with fewer points
 // than dimensions; the per-step fit recovers a known linear-Gaussian system from many
 // samples; with N = 5 samples in a 100-dimensional state and the GMM prior it stays finite,
-// positive definite and predicts held-out transitions better than the samples alone.
+// positive definite and predicts held-out transitions better than the samples alone. A thread
+// pool gives the same mixture and fit.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -123,6 +124,35 @@ TEST(Gmm, NegligibleResponsibilitiesAreZeroNotSubnormal) {
   for (Eigen::Index i = 0; i < r.size(); ++i) EXPECT_NE(std::fpclassify(r(i)), FP_SUBNORMAL) << i;
   // The log density is unchanged: log(0.5 N(0; 0, 1)).
   EXPECT_NEAR(gmm.logDensity(z)[0], std::log(0.5) - 0.5 * std::log(2 * M_PI), 1e-14);
+}
+
+TEST(DynamicsFit, AThreadPoolGivesTheSameGmmAndFit) {
+  std::mt19937 rng(5);
+  const TrueSystem sys(rng, 20, 4, 10, 0.05, 0.05, false);
+  const std::vector<Rollout> past = sys.rollouts(rng, 30), now = sys.rollouts(rng, 5);
+  ThreadPool pool(2);
+  GmmSettings settings;
+  Gmm serial, parallel;
+  std::vector<double> serial_history, parallel_history;
+  serial.fit(transitionPoints(past), settings, &serial_history);
+  settings.pool = &pool;
+  parallel.fit(transitionPoints(past), settings, &parallel_history);
+  EXPECT_EQ(serial_history, parallel_history);
+  EXPECT_EQ(serial.weights, parallel.weights);
+  for (int k = 0; k < serial.clusters(); ++k) {
+    EXPECT_EQ(serial.means[k], parallel.means[k]) << k;
+    EXPECT_EQ(serial.covariances[k], parallel.covariances[k]) << k;
+  }
+  DynamicsFitSettings fit_settings;
+  const LgDynamics a = fitDynamics(now, &serial);
+  fit_settings.pool = &pool;
+  const LgDynamics b = fitDynamics(now, &serial, fit_settings);
+  for (int t = 0; t < sys.T; ++t) {
+    EXPECT_EQ(a.Fx[t], b.Fx[t]) << t;
+    EXPECT_EQ(a.Fu[t], b.Fu[t]) << t;
+    EXPECT_EQ(a.f[t], b.f[t]) << t;
+    EXPECT_EQ(a.Sigma[t], b.Sigma[t]) << t;
+  }
 }
 
 TEST(DynamicsFit, RecoversAKnownSystemFromManySamples) {

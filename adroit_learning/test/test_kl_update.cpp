@@ -2,7 +2,7 @@
 // textbook Riccati recursion with affine terms (computed here, without the augmented state);
 // the marginals and expected cost match Monte Carlo; the dual descent lands in the KL band
 // (or is slack at eta_min) in few evaluations; KL(p || p) = 0 and the KL grows with epsilon; indefinite costs
-// fall back to a larger eta; the step-size rule.
+// fall back to a larger eta; a thread pool gives the same update; the step-size rule.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -221,6 +221,38 @@ TEST(KlUpdate, DualDescentNeedsFewEvaluations) {
             << double(warm) / cases << "\n";
   EXPECT_LE(cold, 4 * cases);
   EXPECT_LE(2 * warm, 7 * cases);
+}
+
+TEST(KlUpdate, AThreadPoolGivesTheSameUpdate) {
+  std::mt19937 rng(11);
+  const int nx = 6, nu = 3, T = 20;
+  const LgDynamics dyn = randomDynamics(rng, nx, nu, T);
+  const QuadraticCost cost = randomCost(rng, nx, nu, T);
+  const LgController prev = initialController(nx, nu, T);
+  ThreadPool pool(2);
+  KlUpdateSettings parallel;
+  parallel.pool = &pool;
+  KlUpdate serial_update(nx, nu, T), parallel_update(nx, nu, T);
+  const KlUpdateResult a = serial_update.update(dyn, cost, prev, 0.5);
+  const KlUpdateResult b = parallel_update.update(dyn, cost, prev, 0.5, parallel);
+  ASSERT_TRUE(a.converged && b.converged);
+  EXPECT_EQ(a.eta, b.eta);
+  EXPECT_EQ(a.kl, b.kl);
+  EXPECT_EQ(a.predicted_cost, b.predicted_cost);
+  EXPECT_EQ(a.iterations, b.iterations);
+  for (int t = 0; t < T; ++t) {
+    EXPECT_EQ(a.controller.K[t], b.controller.K[t]) << t;
+    EXPECT_EQ(a.controller.k[t], b.controller.k[t]) << t;
+    EXPECT_EQ(a.controller.covariance(t), b.controller.covariance(t)) << t;
+  }
+  TrajectoryMarginals ma, mb;
+  forwardMarginals(dyn, a.controller, ma);
+  forwardMarginals(dyn, a.controller, mb, &pool);
+  for (int t = 0; t < T; ++t) {
+    EXPECT_EQ(ma.xu_mean[t], mb.xu_mean[t]) << t;
+    EXPECT_EQ(ma.xu_cov[t], mb.xu_cov[t]) << t;
+  }
+  EXPECT_EQ(klDivergence(a.controller, prev, ma), klDivergence(a.controller, prev, mb, &pool));
 }
 
 TEST(KlUpdate, KlGrowsAndPredictedCostFallsWithEpsilon) {

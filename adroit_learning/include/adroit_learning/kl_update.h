@@ -69,13 +69,16 @@ struct TrajectoryMarginals {
   Eigen::MatrixXd xT_cov;
 };
 
-// Forward pass of the marginals (allocates on first use of `out` only).
-void forwardMarginals(const LgDynamics& dyn, const LgController& controller, TrajectoryMarginals& out);
+// Forward pass of the marginals (allocates on first use of `out` only). `pool`: the steps'
+// action blocks on its workers (the state chain itself is sequential).
+void forwardMarginals(const LgDynamics& dyn, const LgController& controller, TrajectoryMarginals& out,
+                      ThreadPool* pool = nullptr);
 // E[sum_t l_t + l_T] under the marginals (exact for Gaussian marginals and quadratic cost).
 double expectedCost(const QuadraticCost& cost, const TrajectoryMarginals& marginals);
 // KL(p_new(tau) || p_old(tau)) = sum_t E_{x ~ p_new(x_t)} KL(p_new(u|x) || p_old(u|x)), given
 // p_new's marginals (both trajectory distributions share the dynamics and x_0).
-double klDivergence(const LgController& p_new, const LgController& p_old, const TrajectoryMarginals& new_marginals);
+double klDivergence(const LgController& p_new, const LgController& p_old, const TrajectoryMarginals& new_marginals,
+                    ThreadPool* pool = nullptr);
 
 struct KlUpdateSettings {
   double eta_init = 1.0;       // first multiplier tried (warm start: the last update's eta)
@@ -83,6 +86,7 @@ struct KlUpdateSettings {
   double eta_max = 1e16;       // largest eta tried before giving up
   double tolerance = 0.1;      // accept |KL - epsilon| <= tolerance * epsilon
   int max_iterations = 100;    // evaluations of the max-entropy LQR
+  ThreadPool* pool = nullptr;  // when set: the per-step work outside the backward pass on its workers
 };
 
 struct KlUpdateResult {
@@ -116,17 +120,17 @@ class KlUpdate {
   // The parts of the surrogate LQ problem that do not depend on eta, loaded once per update:
   // the augmented dynamics, and the old controller's -log p_old(u|x) terms.
   void loadDynamics(const LgDynamics& dyn);
-  void loadPrevious(const LgController& prev);
-  bool solveLoaded(const QuadraticCost& cost, bool with_prev, double eta, LgController& out);
+  void loadPrevious(const LgController& prev, ThreadPool* pool);
+  bool solveLoaded(const QuadraticCost& cost, bool with_prev, double eta, LgController& out, ThreadPool* pool);
+  void sizeWorkspaces(ThreadPool* pool);  // one of each per worker
   int nx_, nu_, horizon_;
   LqApproximation lq_;
   BackwardPass pass_;
   FeedbackGains gains_;
-  Eigen::MatrixXd P_, PK_;  // old controller's precision and precision * K
-  Eigen::VectorXd Pk_;
   std::vector<Eigen::MatrixXd> prev_P_, prev_PK_, prev_KPK_;  // per step, of the loaded old controller
   std::vector<Eigen::VectorXd> prev_Pk_, prev_KPk_;
-  Eigen::LLT<Eigen::MatrixXd> llt_;
+  std::vector<Eigen::MatrixXd> inverse_;            // per worker, nu x nu: L^-1 or Quu^-1
+  std::vector<Eigen::LLT<Eigen::MatrixXd>> llt_;   // per worker, of Quu
   TrajectoryMarginals marginals_;
 };
 

@@ -72,27 +72,92 @@ struct GmmFactors {
   }
 };
 
-// log w_k + log N(z; mu_k, S_k) (clusters x points) into `out`; y: one scratch matrix per
-// worker of `pool` (clusters on its workers).
-void logJointFactored(const Gmm& gmm, const GmmFactors& factors, const Eigen::MatrixXd& points, Eigen::MatrixXd& out,
-                      std::vector<Eigen::MatrixXd>& y, ThreadPool* pool) {
-  out.resize(gmm.clusters(), points.cols());
-  forEachIndex(pool, gmm.clusters(), [&](std::size_t k, std::size_t worker) {
-    Eigen::MatrixXd& yk = y[worker];
-    yk = points.colwise() - gmm.means[k];
-    factors.llt[k].matrixL().solveInPlace(yk);
-    const double log_w =
-        gmm.weights[k] > 0 ? std::log(gmm.weights[k]) : -std::numeric_limits<double>::infinity();
-    out.row(k) =
-        (-0.5 * (yk.colwise().squaredNorm().array() + factors.log_det[k] + points.rows() * kLog2Pi) + log_w).matrix();
-  });
-}
-
 // Responsibilities below exp(-230) ~ 1e-100 count as exactly 0: they change no sum at double
 // precision, but in high dimensions (log-likelihood gaps of thousands between clusters) the
 // products they enter underflow into subnormal numbers, which x86 processes ~100x slower (the
 // M-step's rank update and fitDynamics' moment matching took 10-20x longer).
 constexpr double kLogNegligible = -230.0;
+
+// log w_k + log N(z; mu_k, S_k) (clusters x points) into `out`; y: one d x n scratch matrix
+// per worker of `pool` (clusters on its workers).
+//
+// With `owner` (a cluster per point, e.g. the last E-step's most responsible one), entries
+// that are negligible next to the owner's -- log-joint below the owner's + kLogNegligible, so
+// responsibility 0 -- come out as -inf without being finished: the whitened vector
+// L_k^-1 (z - mu_k) is computed by blocks of rows (forward substitution), its squared norm so
+// far only grows, and a point leaves cluster k's solve as soon as that partial norm rules it
+// out. With the nearly hard responsibilities of high dimensions most points leave after the
+// first block, and the E-step costs about one full solve per point instead of one per cluster.
+void logJointFactored(const Gmm& gmm, const GmmFactors& factors, const Eigen::MatrixXd& points, Eigen::MatrixXd& out,
+                      std::vector<Eigen::MatrixXd>& y, ThreadPool* pool, const Eigen::VectorXi* owner = nullptr) {
+  const Eigen::Index d = points.rows(), n = points.cols();
+  const int K = gmm.clusters();
+  out.resize(K, n);
+  const auto constant = [&](std::size_t k) {  // log w_k - 0.5 (log det S_k + d log 2 pi)
+    const double log_w = gmm.weights[k] > 0 ? std::log(gmm.weights[k]) : -std::numeric_limits<double>::infinity();
+    return log_w - 0.5 * (factors.log_det[k] + static_cast<double>(d) * kLog2Pi);
+  };
+  if (!owner) {
+    forEachIndex(pool, K, [&](std::size_t k, std::size_t worker) {
+      Eigen::MatrixXd& yk = y[worker];
+      yk = points.colwise() - gmm.means[k];
+      factors.llt[k].matrixL().solveInPlace(yk);
+      out.row(k) = (constant(k) - 0.5 * yk.colwise().squaredNorm().array()).matrix();
+    });
+    return;
+  }
+  // The owners' entries in full first: they set each point's threshold.
+  forEachIndex(pool, K, [&](std::size_t k, std::size_t worker) {
+    Eigen::MatrixXd& yk = y[worker];
+    Eigen::Index m = 0;
+    for (Eigen::Index i = 0; i < n; ++i)
+      if ((*owner)[i] == static_cast<int>(k)) yk.col(m++) = points.col(i) - gmm.means[k];
+    if (m == 0) return;
+    auto block = yk.leftCols(m);
+    factors.llt[k].matrixL().solveInPlace(block);
+    const double c = constant(k);
+    m = 0;
+    for (Eigen::Index i = 0; i < n; ++i)
+      if ((*owner)[i] == static_cast<int>(k)) out(k, i) = c - 0.5 * yk.col(m++).squaredNorm();
+  });
+  constexpr Eigen::Index kRows = 32;  // rows per block of the forward substitution
+  forEachIndex(pool, K, [&](std::size_t k, std::size_t worker) {
+    Eigen::MatrixXd& yk = y[worker];
+    const Eigen::MatrixXd& L = factors.llt[k].matrixLLT();  // lower triangle = L
+    const double c = constant(k);
+    std::vector<Eigen::Index> active;  // points still in this cluster's solve, in yk's column order
+    for (Eigen::Index i = 0; i < n; ++i)
+      if ((*owner)[i] != static_cast<int>(k)) {
+        yk.col(static_cast<Eigen::Index>(active.size())) = points.col(i) - gmm.means[k];
+        active.push_back(i);
+      }
+    Eigen::VectorXd partial = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(active.size()));
+    for (Eigen::Index r0 = 0; r0 < d && !active.empty(); r0 += kRows) {
+      const Eigen::Index h = std::min(kRows, d - r0), m = static_cast<Eigen::Index>(active.size());
+      auto rows = yk.block(r0, 0, h, m);
+      if (r0 > 0) rows.noalias() -= L.block(r0, 0, h, r0) * yk.topLeftCorner(r0, m);
+      L.block(r0, r0, h, h).triangularView<Eigen::Lower>().solveInPlace(rows);
+      partial.head(m) += rows.colwise().squaredNorm().transpose();
+      // Keep the points whose log-joint can still reach their owner's + kLogNegligible.
+      Eigen::Index kept = 0;
+      for (Eigen::Index j = 0; j < m; ++j) {
+        const Eigen::Index i = active[j];
+        if (c - 0.5 * partial[j] < out((*owner)[i], i) + kLogNegligible) {
+          out(k, i) = -std::numeric_limits<double>::infinity();
+          continue;
+        }
+        if (kept != j) {
+          yk.col(kept) = yk.col(j);
+          partial[kept] = partial[j];
+          active[kept] = i;
+        }
+        ++kept;
+      }
+      active.resize(kept);
+    }
+    for (std::size_t j = 0; j < active.size(); ++j) out(k, active[j]) = c - 0.5 * partial[j];
+  });
+}
 
 // Column-wise log-sum-exp of the log-joint lj (the log density of each point), with lj turned
 // into the responsibilities in place.
@@ -217,17 +282,23 @@ double Gmm::fitOnce(const Eigen::MatrixXd& points, const GmmSettings& s, std::ui
   maximise(hard);
 
   // One factorisation and one log-joint per iteration: the objective of the current
-  // parameters and the next E-step's responsibilities come from the same evaluation.
+  // parameters and the next E-step's responsibilities come from the same evaluation. The
+  // E-step prunes against `owner`: the hard start's assignment, then each point's most
+  // responsible cluster of the last E-step.
   GmmFactors factors;
   Eigen::MatrixXd lj;
   const auto objective = [&]() {
     factors.compute(covariances, s.pool);
-    logJointFactored(*this, factors, points, lj, scratch, s.pool);
+    logJointFactored(*this, factors, points, lj, scratch, s.pool, &owner);
     return normaliseColumns(lj).sum() - 0.5 * s.regularization * factors.traceOfInverses(s.pool);
   };
   history.assign(1, objective());
   for (int it = 0; it < s.max_iterations; ++it) {
     maximise(lj);  // lj holds the responsibilities of the current parameters
+    for (Eigen::Index i = 0, best = 0; i < n; ++i) {
+      lj.col(i).maxCoeff(&best);
+      owner[i] = static_cast<int>(best);
+    }
     history.push_back(objective());
     if (history.back() - history[history.size() - 2] < s.tolerance * static_cast<double>(n)) break;
   }

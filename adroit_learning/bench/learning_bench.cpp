@@ -347,6 +347,7 @@ int main(int argc, char** argv) {
       const adroit::KlUpdateResult res = kl_update.update(dyn, cost, controller, epsilon, kl_settings);
       rec.kl = sw.elapsed();
       kl_settings.eta_init = res.eta;  // warm start, as a trainer does
+      kl_settings.kl_slope_init = res.kl_slope;
       rec.eta = res.eta;
       rec.kl_value = res.kl;
       rec.eta_iterations = res.iterations;

@@ -303,6 +303,7 @@ KlUpdateResult KlUpdate::update(const LgDynamics& dyn, const QuadraticCost& cost
     throw std::invalid_argument("KlUpdate::update: epsilon must be positive and finite");
   if (!(s.eta_min > 0 && s.eta_min <= s.eta_max && std::isfinite(s.eta_max)))
     throw std::invalid_argument("KlUpdate::update: need 0 < eta_min <= eta_max < inf");
+  if (!(s.kl_slope_init < 0)) throw std::invalid_argument("KlUpdate::update: kl_slope_init must be negative");
 
   // KL decreases with eta (eta -> inf: the old controller). lo: largest eta known to give
   // KL above the band (or a failed solve); hi: smallest eta known to give KL below it.
@@ -315,6 +316,10 @@ KlUpdateResult KlUpdate::update(const LgDynamics& dyn, const QuadraticCost& cost
   // -2 for large eta, flatter below): extrapolates toward the band until it is bracketed,
   // then interpolates inside the bracket. Previous finite evaluation: for the slope.
   const double log_epsilon = std::log(epsilon);
+  // Slope of log KL over log eta through the last two finite evaluations (kl_slope_init
+  // before there are two), kept within [-4, -0.25] against noise and flat stretches.
+  const auto clampSlope = [](double slope) { return std::min(-0.25, std::max(-4.0, slope)); };
+  double slope = clampSlope(s.kl_slope_init);
   double last_log_eta = 0, last_log_kl = 0;
   bool have_last_point = false;
   int same_end_moves = 0;  // consecutive evaluations that moved the same end (lo or hi)
@@ -333,6 +338,12 @@ KlUpdateResult KlUpdate::update(const LgDynamics& dyn, const QuadraticCost& cost
     }
     const double log_eta = std::log(eta), log_kl = std::log(std::max(kl, 1e-300));
     if (std::isfinite(kl)) {
+      if (have_last_point && log_eta != last_log_eta)
+        slope = clampSlope((log_kl - last_log_kl) / (log_eta - last_log_eta));
+      last_log_eta = log_eta;
+      last_log_kl = log_kl;
+      have_last_point = true;
+      current.kl_slope = slope;
       current.eta = eta;
       current.kl = kl;
       current.predicted_cost = expectedCost(cost, marginals_);
@@ -361,16 +372,6 @@ KlUpdateResult KlUpdate::update(const LgDynamics& dyn, const QuadraticCost& cost
     }
     same_end_moves = moved_lo == last_moved_lo ? same_end_moves + 1 : 1;
     last_moved_lo = moved_lo;
-    // Slope of log KL over log eta through the last two finite evaluations (-1 before
-    // there are two), kept negative and within [-4, -0.25] against noise and flat stretches.
-    double slope = -1.0;
-    if (std::isfinite(kl) && have_last_point && log_eta != last_log_eta)
-      slope = std::min(-0.25, std::max(-4.0, (log_kl - last_log_kl) / (log_eta - last_log_eta)));
-    if (std::isfinite(kl)) {
-      last_log_eta = log_eta;
-      last_log_kl = log_kl;
-      have_last_point = true;
-    }
     if (lo > 0 && std::isfinite(hi)) {
       const double log_lo = std::log(lo), log_hi = std::log(hi), width = log_hi - log_lo;
       // Bracketed: interpolate between its ends (regula falsi in log-log), kept off the ends;

@@ -196,8 +196,9 @@ TEST(KlUpdate, DualDescentLandsInTheKlBandOnRandomProblems) {
 
 TEST(KlUpdate, DualDescentNeedsFewEvaluations) {
   // The secant of log KL over log eta: few evaluations from eta_init = 1, fewer still warm
-  // started from the eta of the last update (epsilon changed by the step-size rule). Geometric
-  // bisection took 5.9 and 5.0 on average here, the secant 3.2 and 2.7.
+  // started from the eta and slope of the last update (epsilon changed by the step-size
+  // rule). Geometric bisection took 5.9 and 5.0 on average here; the secant takes 3.2, and
+  // 2.05 warm started (2.7 from the eta alone).
   int cold = 0, warm = 0, cases = 0;
   for (unsigned seed = 10; seed < 30; ++seed) {
     std::mt19937 rng(seed);
@@ -210,6 +211,7 @@ TEST(KlUpdate, DualDescentNeedsFewEvaluations) {
       const KlUpdateResult first = update.update(dyn, cost, prev, epsilon);
       KlUpdateSettings settings;
       settings.eta_init = first.eta;
+      settings.kl_slope_init = first.kl_slope;
       const KlUpdateResult next = update.update(dyn, cost, prev, 1.7 * epsilon, settings);
       ASSERT_TRUE(first.converged && next.converged) << "seed " << seed << " epsilon " << epsilon;
       cold += first.iterations;
@@ -220,7 +222,7 @@ TEST(KlUpdate, DualDescentNeedsFewEvaluations) {
   std::cout << "evaluations per update: from eta 1 " << double(cold) / cases << ", warm started "
             << double(warm) / cases << "\n";
   EXPECT_LE(cold, 4 * cases);
-  EXPECT_LE(2 * warm, 7 * cases);
+  EXPECT_LE(2 * warm, 5 * cases);
 }
 
 TEST(KlUpdate, AThreadPoolGivesTheSameUpdate) {

@@ -82,6 +82,8 @@ double klDivergence(const LgController& p_new, const LgController& p_old, const 
 
 struct KlUpdateSettings {
   double eta_init = 1.0;       // first multiplier tried (warm start: the last update's eta)
+  double kl_slope_init = -1.0; // d log KL / d log eta until two etas are evaluated (warm
+                               // start: the last update's kl_slope); negative
   double eta_min = 1e-6;       // smallest eta: below it the constraint counts as slack
   double eta_max = 1e16;       // largest eta tried before giving up
   double tolerance = 0.1;      // accept |KL - epsilon| <= tolerance * epsilon
@@ -94,6 +96,7 @@ struct KlUpdateResult {
   double eta = 0;
   double kl = 0;               // KL(p_new || p_old) of the returned controller
   double predicted_cost = 0;   // expected cost of the new controller under the dynamics
+  double kl_slope = -1.0;      // d log KL / d log eta of the last two evaluations (clamped to [-4, -0.25])
   bool converged = false;      // KL within tolerance of epsilon, or below it at eta_min
   int iterations = 0;
 };

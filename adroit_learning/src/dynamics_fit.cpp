@@ -351,24 +351,30 @@ LgDynamics fitDynamics(const std::vector<Rollout>& rollouts, const Gmm* prior, c
       for (int k = 0; k < prior->clusters(); ++k) w.mu0 += weight[k] * prior->means[k];
       w.S0.setZero(d, d);
       for (int k = 0; k < prior->clusters(); ++k) {
+        if (weight[k] == 0) continue;  // usual: the step's points all sit in one cluster
         w.diff = prior->means[k] - w.mu0;
-        w.S0 += weight[k] * (prior->covariances[k] + w.diff * w.diff.transpose());
+        w.S0.noalias() += weight[k] * prior->covariances[k];
+        w.S0.noalias() += (weight[k] * w.diff) * w.diff.transpose();
       }
       w.diff = w.mu - w.mu0;
       w.S = (n0 * w.S0 + N * w.S + (N * m / (N + m)) * w.diff * w.diff.transpose()) / (N + n0);
       w.mu = (m * w.mu0 + N * w.mu) / (m + N);
     }
-    // Condition the joint Gaussian on (x, u): F = S_x'z S_zz^-1.
+    // Condition the joint Gaussian on (x, u) through S_zz = L L':  with W = L^-1 S_zx',
+    // F' = S_zz^-1 S_zx' = L'^-1 W and Sigma = S_x'x' - S_x'z S_zz^-1 S_zx' = S_x'x' - W'W.
     w.Szz = w.S.topLeftCorner(nxu, nxu);
     w.Szz.diagonal().array() += s.regularization;
     w.llt.compute(w.Szz);
     if (w.llt.info() != Eigen::Success) throw std::runtime_error("fitDynamics: (x, u) covariance not positive definite");
-    w.Fxu_t = w.llt.solve(w.S.bottomLeftCorner(nx, nxu).transpose());  // (nxu x nx) = F'
+    w.Fxu_t = w.S.bottomLeftCorner(nx, nxu).transpose();
+    w.llt.matrixL().solveInPlace(w.Fxu_t);  // W
+    w.sigma = w.S.bottomRightCorner(nx, nx);
+    w.sigma.selfadjointView<Eigen::Lower>().rankUpdate(w.Fxu_t.transpose(), -1.0);
+    w.llt.matrixU().solveInPlace(w.Fxu_t);  // (nxu x nx) = F'
     dyn.Fx[t] = w.Fxu_t.topRows(nx).transpose();
     dyn.Fu[t] = w.Fxu_t.bottomRows(nu).transpose();
     dyn.f[t] = w.mu.tail(nx) - dyn.Fx[t] * w.mu.head(nx) - dyn.Fu[t] * w.mu.segment(nx, nu);
-    w.sigma = w.S.bottomRightCorner(nx, nx) - w.S.bottomLeftCorner(nx, nxu) * w.Fxu_t;
-    dyn.Sigma[t] = 0.5 * (w.sigma + w.sigma.transpose());
+    dyn.Sigma[t] = w.sigma.selfadjointView<Eigen::Lower>();
     dyn.Sigma[t].diagonal().array() += s.regularization;
   });
   return dyn;

@@ -19,10 +19,13 @@
 // commands in [-2, 2] V). Update and rollouts alternate (update first on even iterations,
 // rollouts first on odd ones) so both see the same machine load.
 //
-// Usage: learning_bench [--iterations N] [--epsilon E] [--scene NAME] [--seed S] [--out DIR]
+// Usage: learning_bench [--iterations N] [--epsilon E] [--scene NAME] [--seed S] [--threads N] [--out DIR]
+//   --threads: workers of the adroit_core::ThreadPool the GMM, the dynamics fit and the KL
+//          update use; 0 (default) one per core, 1 no pool (serial)
 //   --out: directory of phases.csv and the plot drawn from it by plot_learning.py (installed
 //          next to this program); default learning_bench_out
 #include <adroit_core/normal_noise.h>
+#include <adroit_core/thread_pool.h>
 #include <adroit_core/timing_stats.h>
 #include <adroit_description/scenes.h>
 #include <adroit_driver/simulated_robot.h>
@@ -254,6 +257,7 @@ int main(int argc, char** argv) {
   double epsilon = 0.2 * kT;  // KL bound of the whole trajectory (0.2 per step)
   std::string scene = "arm_hand", out_dir = "learning_bench_out";
   std::uint64_t seed = 1;
+  int threads = 0;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     const auto value = [&]() -> std::string {
@@ -264,16 +268,22 @@ int main(int argc, char** argv) {
     else if (a == "--epsilon") epsilon = std::stod(value());
     else if (a == "--scene") scene = value();
     else if (a == "--seed") seed = std::stoull(value());
+    else if (a == "--threads") threads = std::stoi(value());
     else if (a == "--out") out_dir = value();
     else {
-      std::fprintf(stderr, "usage: learning_bench [--iterations N] [--epsilon E] [--scene NAME] [--seed S] [--out DIR]\n");
+      std::fprintf(stderr,
+                   "usage: learning_bench [--iterations N] [--epsilon E] [--scene NAME] [--seed S] [--threads N] "
+                   "[--out DIR]\n");
       return 2;
     }
   }
   if (iterations < kHistory) iterations = kHistory;  // at least one iteration with the full history
 
-  std::printf("learning_bench: nx %d, nu %d, T %d, N %d rollouts per iteration, GMM over the last %d iterations\n",
-              kNx, kNu, kT, kN, kHistory);
+  std::unique_ptr<adroit::ThreadPool> pool;
+  if (threads != 1) pool = std::make_unique<adroit::ThreadPool>(static_cast<std::size_t>(std::max(threads, 0)));
+  std::printf("learning_bench: nx %d, nu %d, T %d, N %d rollouts per iteration, GMM over the last %d iterations, "
+              "%zu thread(s)\n",
+              kNx, kNu, kT, kN, kHistory, pool ? pool->size() : std::size_t{1});
   NormalNoise rng(seed), sys_rng(seed + 100);
   const SyntheticSystem system(sys_rng);
   TaskCost cost_fn;
@@ -290,6 +300,9 @@ int main(int argc, char** argv) {
   std::vector<std::vector<Rollout>> history;  // the last kHistory iterations' samples
   adroit::KlUpdate kl_update(kNx, kNu, kT);
   adroit::KlUpdateSettings kl_settings;
+  adroit::GmmSettings gmm_settings;
+  adroit::DynamicsFitSettings dynamics_settings;
+  gmm_settings.pool = dynamics_settings.pool = kl_settings.pool = pool.get();
   adroit::Gmm gmm;
   QuadraticCost cost;
   std::vector<IterationRecord> records;
@@ -316,11 +329,11 @@ int main(int argc, char** argv) {
       adroit::Stopwatch sw;
       std::vector<Rollout> recent;
       for (const auto& h : history) recent.insert(recent.end(), h.begin(), h.end());
-      gmm.fit(adroit::transitionPoints(recent));
+      gmm.fit(adroit::transitionPoints(recent), gmm_settings);
       rec.gmm = sw.elapsed();
 
       sw.restart();
-      const LgDynamics dyn = adroit::fitDynamics(samples, &gmm);
+      const LgDynamics dyn = adroit::fitDynamics(samples, &gmm, dynamics_settings);
       rec.dynamics = sw.elapsed();
 
       sw.restart();
@@ -329,11 +342,12 @@ int main(int argc, char** argv) {
 
       sw.restart();
       adroit::TrajectoryMarginals old_marginals;
-      adroit::forwardMarginals(dyn, controller, old_marginals);
+      adroit::forwardMarginals(dyn, controller, old_marginals, pool.get());
       previous_expected = adroit::expectedCost(cost, old_marginals);
       const adroit::KlUpdateResult res = kl_update.update(dyn, cost, controller, epsilon, kl_settings);
       rec.kl = sw.elapsed();
       kl_settings.eta_init = res.eta;  // warm start, as a trainer does
+      kl_settings.kl_slope_init = res.kl_slope;
       rec.eta = res.eta;
       rec.kl_value = res.kl;
       rec.eta_iterations = res.iterations;

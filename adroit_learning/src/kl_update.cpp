@@ -53,7 +53,7 @@ void QuadraticCost::resize(int nx, int nu, int horizon) {
   cu.assign(horizon, Eigen::VectorXd::Zero(nu));
 }
 
-void forwardMarginals(const LgDynamics& dyn, const LgController& c, TrajectoryMarginals& out) {
+void forwardMarginals(const LgDynamics& dyn, const LgController& c, TrajectoryMarginals& out, ThreadPool* pool) {
   const int nx = dyn.nx, nu = dyn.nu, T = dyn.horizon;
   if (c.nx() != nx || c.nu() != nu || c.horizon() != T)
     throw std::invalid_argument("forwardMarginals: controller and dynamics sizes differ");
@@ -61,38 +61,46 @@ void forwardMarginals(const LgDynamics& dyn, const LgController& c, TrajectoryMa
     out.xu_mean.assign(T, Eigen::VectorXd::Zero(nx + nu));
     out.xu_cov.assign(T, Eigen::MatrixXd::Zero(nx + nu, nx + nu));
   }
+  // The state marginals are a chain: x_{t+1} has mean G mu + Fu k + f and covariance
+  // G sigma G' + Fu C Fu' + Sigma with G = Fx + Fu K, C = L L'. Only the lower triangles of
+  // the symmetric products are computed.
   Eigen::VectorXd mu = dyn.x0_mean;
   Eigen::MatrixXd sigma = dyn.x0_cov;
-  Eigen::MatrixXd KS(nu, nx), G(nx, nx), GS(nx, nx), FuC(nx, nu), next(nx, nx);
+  Eigen::VectorXd mu_next(nx);
+  Eigen::MatrixXd G(nx, nx), GS(nx, nx), FuL(nx, nu), next(nx, nx);
   for (int t = 0; t < T; ++t) {
-    const Eigen::MatrixXd& K = c.K[t];
-    Eigen::VectorXd& m = out.xu_mean[t];
-    Eigen::MatrixXd& S = out.xu_cov[t];
-    m.head(nx) = mu;
-    m.tail(nu).noalias() = K * mu;
-    m.tail(nu) += c.k[t];
-    KS.noalias() = K * sigma;
-    S.topLeftCorner(nx, nx) = sigma;
-    S.bottomLeftCorner(nu, nx) = KS;
-    S.topRightCorner(nx, nu) = KS.transpose();
-    S.bottomRightCorner(nu, nu) = c.covariance(t);
-    S.bottomRightCorner(nu, nu).noalias() += KS * K.transpose();
-
-    // x_{t+1}: mean Fx mu + Fu u + f, covariance G sigma G' + Fu C Fu' + Sigma with G = Fx + Fu K.
-    mu = dyn.f[t];
-    mu.noalias() += dyn.Fx[t] * m.head(nx);
-    mu.noalias() += dyn.Fu[t] * m.tail(nu);
+    out.xu_mean[t].head(nx) = mu;
+    out.xu_cov[t].topLeftCorner(nx, nx) = sigma;
     G = dyn.Fx[t];
-    G.noalias() += dyn.Fu[t] * K;
-    FuC.noalias() = dyn.Fu[t] * c.covariance(t);
+    G.noalias() += dyn.Fu[t] * c.K[t];
+    mu_next = dyn.f[t];
+    mu_next.noalias() += G * mu;
+    mu_next.noalias() += dyn.Fu[t] * c.k[t];
+    mu.swap(mu_next);
     GS.noalias() = G * sigma;
+    FuL.noalias() = dyn.Fu[t] * c.choleskyFactor(t).triangularView<Eigen::Lower>();
     next = dyn.Sigma[t];
-    next.noalias() += GS * G.transpose();
-    next.noalias() += FuC * dyn.Fu[t].transpose();
-    sigma = 0.5 * (next + next.transpose());
+    next.triangularView<Eigen::Lower>() += GS * G.transpose();
+    next.selfadjointView<Eigen::Lower>().rankUpdate(FuL);
+    sigma = next.selfadjointView<Eigen::Lower>();
   }
   out.xT_mean = mu;
   out.xT_cov = sigma;
+  // The action parts of each step's joint, given its state marginal: independent steps.
+  std::vector<Eigen::MatrixXd> KS(workerCount(pool), Eigen::MatrixXd(nu, nx));
+  forEachIndex(pool, T, [&](std::size_t t, std::size_t worker) {
+    const Eigen::MatrixXd& K = c.K[t];
+    Eigen::VectorXd& m = out.xu_mean[t];
+    Eigen::MatrixXd& S = out.xu_cov[t];
+    m.tail(nu).noalias() = K * m.head(nx);
+    m.tail(nu) += c.k[t];
+    KS[worker].noalias() = K * S.topLeftCorner(nx, nx);
+    S.bottomLeftCorner(nu, nx) = KS[worker];
+    S.topRightCorner(nx, nu) = KS[worker].transpose();
+    S.bottomRightCorner(nu, nu) = c.covariance(t);
+    S.bottomRightCorner(nu, nu).triangularView<Eigen::Lower>() += KS[worker] * K.transpose();
+    S.bottomRightCorner(nu, nu).triangularView<Eigen::StrictlyUpper>() = S.bottomRightCorner(nu, nu).transpose();
+  });
 }
 
 double expectedCost(const QuadraticCost& cost, const TrajectoryMarginals& m) {
@@ -115,31 +123,37 @@ double expectedCost(const QuadraticCost& cost, const TrajectoryMarginals& m) {
   return total;
 }
 
-double klDivergence(const LgController& p, const LgController& q, const TrajectoryMarginals& m) {
+double klDivergence(const LgController& p, const LgController& q, const TrajectoryMarginals& m, ThreadPool* pool) {
   const int nx = p.nx(), nu = p.nu(), T = p.horizon();
   if (q.nx() != nx || q.nu() != nu || q.horizon() != T || static_cast<int>(m.xu_mean.size()) != T)
     throw std::invalid_argument("klDivergence: controller and marginal sizes differ");
-  double kl = 0;
-  Eigen::MatrixXd Linv_dK(nu, nx), Linv_Lp(nu, nu);
-  Eigen::VectorXd d(nu);
-  for (int t = 0; t < T; ++t) {
+  struct Scratch {
+    Eigen::MatrixXd Linv_dK, Linv_Lp;
+    Eigen::VectorXd d;
+  };
+  std::vector<Scratch> scratch(workerCount(pool));
+  std::vector<double> step_kl(T);  // summed in step order: the same with any pool
+  forEachIndex(pool, T, [&](std::size_t t, std::size_t worker) {
+    Scratch& w = scratch[worker];
     // With q's covariance L L':  tr(P_q C_p) = |L^-1 L_p|_F^2 and the mean terms are
     // |L^-1 (dK mu + dk)|^2 + tr(dK' P_q dK Sigma_x) = |L^-1 dK Sigma_x^1/2|^2 (via trace).
     const auto Lq = q.choleskyFactor(t).triangularView<Eigen::Lower>();
     const auto mu = m.xu_mean[t].head(nx);
     const auto sigma = m.xu_cov[t].topLeftCorner(nx, nx);
-    Linv_dK = p.K[t] - q.K[t];
-    d = p.k[t] - q.k[t];
-    d.noalias() += Linv_dK * mu;
-    Lq.solveInPlace(Linv_dK);
-    Lq.solveInPlace(d);
-    Linv_Lp = p.choleskyFactor(t);
-    Lq.solveInPlace(Linv_Lp);
-    const double trace_term = Linv_Lp.squaredNorm();
-    const double state_term = (Linv_dK * sigma).cwiseProduct(Linv_dK).sum();
-    kl += 0.5 * (trace_term - nu + logDetFromCholesky(q.choleskyFactor(t)) - logDetFromCholesky(p.choleskyFactor(t)) +
-                 d.squaredNorm() + state_term);
-  }
+    w.Linv_dK = p.K[t] - q.K[t];
+    w.d = p.k[t] - q.k[t];
+    w.d.noalias() += w.Linv_dK * mu;
+    Lq.solveInPlace(w.Linv_dK);
+    Lq.solveInPlace(w.d);
+    w.Linv_Lp = p.choleskyFactor(t);
+    Lq.solveInPlace(w.Linv_Lp);
+    const double trace_term = w.Linv_Lp.squaredNorm();
+    const double state_term = (w.Linv_dK * sigma).cwiseProduct(w.Linv_dK).sum();
+    step_kl[t] = 0.5 * (trace_term - nu + logDetFromCholesky(q.choleskyFactor(t)) -
+                        logDetFromCholesky(p.choleskyFactor(t)) + w.d.squaredNorm() + state_term);
+  });
+  double kl = 0;
+  for (double v : step_kl) kl += v;
   return std::max(0.0, kl);  // rounding can leave -1e-16
 }
 
@@ -149,10 +163,8 @@ KlUpdate::KlUpdate(int nx, int nu, int horizon)
       horizon_(horizon),
       lq_(nx + 1, nu, horizon),
       pass_(nx + 1, nu, horizon),
-      P_(nu, nu),
-      PK_(nu, nx),
-      Pk_(nu),
-      llt_(nu) {
+      inverse_(1, Eigen::MatrixXd(nu, nu)),
+      llt_(1, Eigen::LLT<Eigen::MatrixXd>(nu)) {
   gains_.resize(nx + 1, nu, horizon);
 }
 
@@ -190,7 +202,15 @@ void KlUpdate::loadDynamics(const LgDynamics& dyn) {
   }
 }
 
-void KlUpdate::loadPrevious(const LgController& prev) {
+void KlUpdate::sizeWorkspaces(ThreadPool* pool) {
+  const std::size_t workers = workerCount(pool);
+  if (inverse_.size() < workers) {
+    inverse_.resize(workers, Eigen::MatrixXd(nu_, nu_));
+    llt_.resize(workers, Eigen::LLT<Eigen::MatrixXd>(nu_));
+  }
+}
+
+void KlUpdate::loadPrevious(const LgController& prev, ThreadPool* pool) {
   // -log p_old(u|x) = 0.5 (u - Kx - k)' P (u - Kx - k) + const,  P = C_old^-1:
   //   xx: K'PK   ux: -PK   uu: P   x: K'Pk   u: -Pk
   // The same for every eta: computed once per update.
@@ -202,46 +222,49 @@ void KlUpdate::loadPrevious(const LgController& prev) {
     prev_Pk_.assign(T, Eigen::VectorXd(nu));
     prev_KPk_.assign(T, Eigen::VectorXd(nx));
   }
-  for (int t = 0; t < T; ++t) {
+  sizeWorkspaces(pool);
+  forEachIndex(pool, T, [&](std::size_t t, std::size_t worker) {
     const Eigen::MatrixXd& K = prev.K[t];
     // P = L^-T L^-1 from the controller's Cholesky factor C = L L'.
-    P_.setIdentity();
-    prev.choleskyFactor(t).triangularView<Eigen::Lower>().solveInPlace(P_);  // L^-1
-    prev_P_[t].noalias() = P_.transpose() * P_;
+    Eigen::MatrixXd& Linv = inverse_[worker];
+    Linv.setIdentity();
+    prev.choleskyFactor(t).triangularView<Eigen::Lower>().solveInPlace(Linv);
+    prev_P_[t].noalias() = Linv.transpose() * Linv;
     prev_PK_[t].noalias() = prev_P_[t] * K;
     prev_Pk_[t].noalias() = prev_P_[t] * prev.k[t];
     prev_KPK_[t].noalias() = K.transpose() * prev_PK_[t];
     prev_KPk_[t].noalias() = K.transpose() * prev_Pk_[t];
-  }
+  });
 }
 
 bool KlUpdate::solve(const LgDynamics& dyn, const QuadraticCost& cost, const LgController* prev, double eta,
                      LgController& out) {
   checkSizes(dyn, cost, prev);
   loadDynamics(dyn);
-  if (prev) loadPrevious(*prev);
-  return solveLoaded(cost, prev != nullptr, eta, out);
+  if (prev) loadPrevious(*prev, nullptr);
+  return solveLoaded(cost, prev != nullptr, eta, out, nullptr);
 }
 
-bool KlUpdate::solveLoaded(const QuadraticCost& cost, bool with_prev, double eta, LgController& out) {
+bool KlUpdate::solveLoaded(const QuadraticCost& cost, bool with_prev, double eta, LgController& out,
+                           ThreadPool* pool) {
   const int nx = nx_, nu = nu_, T = horizon_;
   const double w = with_prev ? 1.0 / eta : 1.0;  // weight of the task cost
   if (!(w > 0) || !std::isfinite(w)) throw std::invalid_argument("KlUpdate::solve: eta must be positive and finite");
 
-  for (int t = 0; t < T; ++t) {
+  forEachIndex(pool, T, [&](std::size_t t, std::size_t) {
     // Task cost times w.
     lq_.lxx[t].topLeftCorner(nx, nx) = w * cost.cxx[t];
     lq_.lx[t].head(nx) = w * cost.cx[t];
     lq_.luu[t] = w * cost.cuu[t];
     lq_.lux[t].leftCols(nx) = w * cost.cux[t];
     lq_.lu[t] = w * cost.cu[t];
-    if (!with_prev) continue;
+    if (!with_prev) return;
     lq_.lxx[t].topLeftCorner(nx, nx) += prev_KPK_[t];
     lq_.lux[t].leftCols(nx) -= prev_PK_[t];
     lq_.luu[t] += prev_P_[t];
     lq_.lx[t].head(nx) += prev_KPk_[t];
     lq_.lu[t] -= prev_Pk_[t];
-  }
+  });
   lq_.lxx[T].topLeftCorner(nx, nx) = w * cost.cxx[T];
   lq_.lx[T].head(nx) = w * cost.cx[T];
 
@@ -250,22 +273,27 @@ bool KlUpdate::solveLoaded(const QuadraticCost& cost, bool with_prev, double eta
   if (!r.ok) return false;
 
   if (out.nx() != nx || out.nu() != nu || out.horizon() != T) out = LgController(nx, nu, T);
-  for (int t = 0; t < T; ++t) {
+  sizeWorkspaces(pool);
+  std::vector<char> step_ok(T, 0);
+  forEachIndex(pool, T, [&](std::size_t t, std::size_t worker) {
     // u = k~ + K~ [x; 1]  ->  K = K~(:, 0:nx), k = k~ + K~(:, nx).
     out.K[t] = gains_.K[t].leftCols(nx);
     out.k[t] = gains_.k[t] + gains_.K[t].col(nx);
-    llt_.compute(pass_.Quu(t));
-    if (llt_.info() != Eigen::Success) return false;
-    P_.setIdentity();
-    llt_.solveInPlace(P_);  // C = Quu^-1
-    if (!P_.allFinite() || !out.K[t].allFinite() || !out.k[t].allFinite()) return false;
+    Eigen::LLT<Eigen::MatrixXd>& llt = llt_[worker];
+    Eigen::MatrixXd& C = inverse_[worker];
+    llt.compute(pass_.Quu(t));
+    if (llt.info() != Eigen::Success) return;
+    C.setIdentity();
+    llt.solveInPlace(C);  // C = Quu^-1
+    if (!C.allFinite() || !out.K[t].allFinite() || !out.k[t].allFinite()) return;
     try {
-      out.setCovariance(t, 0.5 * (P_ + P_.transpose()));
+      out.setCovariance(t, 0.5 * (C + C.transpose()));
     } catch (const std::invalid_argument&) {
-      return false;  // Quu^-1 numerically not PD (extremely ill-conditioned Quu)
+      return;  // Quu^-1 numerically not PD (extremely ill-conditioned Quu)
     }
-  }
-  return true;
+    step_ok[t] = 1;
+  });
+  return std::all_of(step_ok.begin(), step_ok.end(), [](char ok) { return ok != 0; });
 }
 
 KlUpdateResult KlUpdate::update(const LgDynamics& dyn, const QuadraticCost& cost, const LgController& prev,
@@ -275,26 +303,47 @@ KlUpdateResult KlUpdate::update(const LgDynamics& dyn, const QuadraticCost& cost
     throw std::invalid_argument("KlUpdate::update: epsilon must be positive and finite");
   if (!(s.eta_min > 0 && s.eta_min <= s.eta_max && std::isfinite(s.eta_max)))
     throw std::invalid_argument("KlUpdate::update: need 0 < eta_min <= eta_max < inf");
+  if (!(s.kl_slope_init < 0)) throw std::invalid_argument("KlUpdate::update: kl_slope_init must be negative");
 
   // KL decreases with eta (eta -> inf: the old controller). lo: largest eta known to give
   // KL above the band (or a failed solve); hi: smallest eta known to give KL below it.
   loadDynamics(dyn);
-  loadPrevious(prev);
+  loadPrevious(prev, s.pool);
   double lo = 0, hi = std::numeric_limits<double>::infinity();
+  double log_kl_lo = std::numeric_limits<double>::infinity(), log_kl_hi = 0;
   double eta = std::min(std::max(s.eta_init, s.eta_min), s.eta_max);
+  // The secant of log KL over log eta (KL is close to a power law over a decade or two, slope
+  // -2 for large eta, flatter below): extrapolates toward the band until it is bracketed,
+  // then interpolates inside the bracket. Previous finite evaluation: for the slope.
+  const double log_epsilon = std::log(epsilon);
+  // Slope of log KL over log eta through the last two finite evaluations (kl_slope_init
+  // before there are two), kept within [-4, -0.25] against noise and flat stretches.
+  const auto clampSlope = [](double slope) { return std::min(-0.25, std::max(-4.0, slope)); };
+  double slope = clampSlope(s.kl_slope_init);
+  double last_log_eta = 0, last_log_kl = 0;
+  bool have_last_point = false;
+  int same_end_moves = 0;  // consecutive evaluations that moved the same end (lo or hi)
+  bool last_moved_lo = false;
   // Fallbacks when the band is not reached: the last controller inside the constraint, else
   // the last one solved at all.
   KlUpdateResult current, best, last;
   bool have_best = false, have_last = false;
   for (int it = 1; it <= s.max_iterations; ++it) {
-    const bool ok = solveLoaded(cost, true, eta, current.controller);
+    const bool ok = solveLoaded(cost, true, eta, current.controller, s.pool);
     double kl = std::numeric_limits<double>::infinity();
     if (ok) {
-      forwardMarginals(dyn, current.controller, marginals_);
-      kl = klDivergence(current.controller, prev, marginals_);
+      forwardMarginals(dyn, current.controller, marginals_, s.pool);
+      kl = klDivergence(current.controller, prev, marginals_, s.pool);
       if (!std::isfinite(kl)) kl = std::numeric_limits<double>::infinity();
     }
+    const double log_eta = std::log(eta), log_kl = std::log(std::max(kl, 1e-300));
     if (std::isfinite(kl)) {
+      if (have_last_point && log_eta != last_log_eta)
+        slope = clampSlope((log_kl - last_log_kl) / (log_eta - last_log_eta));
+      last_log_eta = log_eta;
+      last_log_kl = log_kl;
+      have_last_point = true;
+      current.kl_slope = slope;
       current.eta = eta;
       current.kl = kl;
       current.predicted_cost = expectedCost(cost, marginals_);
@@ -312,19 +361,36 @@ KlUpdateResult KlUpdate::update(const LgDynamics& dyn, const QuadraticCost& cost
       last = current;
       have_last = true;
     }
-    if (kl < epsilon) {
-      hi = eta;
-    } else {
+    const bool moved_lo = !(kl < epsilon);
+    if (moved_lo) {
       lo = eta;
+      log_kl_lo = log_kl;
       if (eta >= s.eta_max) break;  // even the largest eta moves too far (or fails)
+    } else {
+      hi = eta;
+      log_kl_hi = log_kl;
     }
-    // Next eta: geometric bisection once bracketed, else steps of 10 toward the bracket.
-    if (lo > 0 && std::isfinite(hi))
-      eta = std::sqrt(lo * hi);
-    else if (lo > 0)
-      eta = std::min(lo * 10.0, s.eta_max);
-    else
-      eta = std::max(hi / 10.0, s.eta_min);
+    same_end_moves = moved_lo == last_moved_lo ? same_end_moves + 1 : 1;
+    last_moved_lo = moved_lo;
+    if (lo > 0 && std::isfinite(hi)) {
+      const double log_lo = std::log(lo), log_hi = std::log(hi), width = log_hi - log_lo;
+      // Bracketed: interpolate between its ends (regula falsi in log-log), kept off the ends;
+      // geometric bisection when lo's solve failed, or when the same end moved three times
+      // in a row (regula falsi then converges slowly).
+      double next = 0.5 * (log_lo + log_hi);
+      if (std::isfinite(log_kl_lo) && same_end_moves < 3) {
+        next = log_lo + (log_epsilon - log_kl_lo) * width / (log_kl_hi - log_kl_lo);
+        next = std::min(std::max(next, log_lo + 0.05 * width), log_hi - 0.05 * width);
+      }
+      eta = std::exp(next);
+    } else if (lo > 0) {
+      // KL above the band at every eta so far: larger eta, by the secant when lo was solved
+      // (at most 100x per step), by 10x after a failed solve.
+      const double factor = std::isfinite(log_kl_lo) ? std::exp((log_epsilon - log_kl_lo) / slope) : 10.0;
+      eta = std::min(lo * std::min(factor, 100.0), s.eta_max);
+    } else {
+      eta = std::max(hi * std::max(std::exp((log_epsilon - log_kl_hi) / slope), 0.01), s.eta_min);
+    }
   }
   if (have_best) return best;  // not converged, but inside the constraint
   if (have_last) return last;  // not converged: KL above epsilon even at the largest eta tried

@@ -1,7 +1,8 @@
 // Dynamics fitting: EM never decreases its (penalised) log-likelihood, also with fewer points
 // than dimensions; the per-step fit recovers a known linear-Gaussian system from many
 // samples; with N = 5 samples in a 100-dimensional state and the GMM prior it stays finite,
-// positive definite and predicts held-out transitions better than the samples alone.
+// positive definite and predicts held-out transitions better than the samples alone. A thread
+// pool gives the same mixture and fit.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -102,6 +103,82 @@ TEST(Gmm, EmNeverDecreasesTheObjective) {
     const double centre = std::round(gmm.means[k].mean() / 2.0) * 2.0;
     EXPECT_LT((gmm.means[k] - VectorXd::Constant(4, centre)).norm(), 0.2) << k << ": " << gmm.means[k].transpose();
     EXPECT_NEAR(gmm.weights[k], 1.0 / 3.0, 0.01) << k;
+  }
+}
+
+TEST(Gmm, PrunedEStepGivesTheExactObjectiveInHighDimensions) {
+  // EM's E-step drops the point-cluster pairs that cannot matter before finishing them. Its
+  // objective must stay the unpruned one: on three clusters 3 apart per coordinate in 100-D
+  // (gaps of hundreds of nats: most pairs dropped early), and on one Gaussian cloud in 40-D
+  // split into overlapping clusters (soft responsibilities: pairs a few nats apart kept).
+  std::mt19937 rng(6);
+  MatrixXd separated(100, 300);
+  for (int i = 0; i < 300; ++i)
+    separated.col(i) = randn(rng, 100, 1, 1.0) + VectorXd::Constant(100, 3.0 * (i % 3));
+  const MatrixXd overlapping = randn(rng, 40, 400, 1.0);
+  for (const MatrixXd* z : std::vector<const MatrixXd*>{&separated, &overlapping}) {
+    for (int clusters : {2, 3}) {
+      GmmSettings settings;
+      settings.clusters = clusters;
+      settings.regularization = 1e-3;
+      Gmm gmm;
+      std::vector<double> history;
+      gmm.fit(*z, settings, &history);
+      EXPECT_NEAR(history.back(), gmm.penalisedLogLikelihood(*z, settings.regularization),
+                  1e-9 * std::abs(history.back()))
+          << z->rows() << "-D, " << clusters << " clusters";
+      for (size_t i = 1; i < history.size(); ++i)
+        EXPECT_GE(history[i], history[i - 1] - 1e-9 * std::abs(history[i - 1])) << clusters << " iteration " << i;
+    }
+  }
+}
+
+TEST(Gmm, NegligibleResponsibilitiesAreZeroNotSubnormal) {
+  // Two unit-variance clusters 1440^0.5 apart in 1-D: at z = 0 the far cluster's log
+  // responsibility is -720, whose exp is subnormal (x86 computes with those ~100x slower).
+  const double far = std::sqrt(1440.0);
+  Gmm gmm;
+  gmm.weights = {0.5, 0.5};
+  gmm.means = {VectorXd::Zero(1), VectorXd::Constant(1, far)};
+  gmm.covariances = {MatrixXd::Identity(1, 1), MatrixXd::Identity(1, 1)};
+  // At z(1) the first cluster's log responsibility ratio is -100: tiny but kept.
+  MatrixXd z(1, 2);
+  z << 0.0, 0.5 * far + 100.0 / far;
+  const MatrixXd r = gmm.responsibilities(z);
+  EXPECT_EQ(r(1, 0), 0.0);
+  EXPECT_EQ(r(0, 0), 1.0);
+  EXPECT_NEAR(r(0, 1) / std::exp(-100.0), 1.0, 1e-9);
+  for (Eigen::Index i = 0; i < r.size(); ++i) EXPECT_NE(std::fpclassify(r(i)), FP_SUBNORMAL) << i;
+  // The log density is unchanged: log(0.5 N(0; 0, 1)).
+  EXPECT_NEAR(gmm.logDensity(z)[0], std::log(0.5) - 0.5 * std::log(2 * M_PI), 1e-14);
+}
+
+TEST(DynamicsFit, AThreadPoolGivesTheSameGmmAndFit) {
+  std::mt19937 rng(5);
+  const TrueSystem sys(rng, 20, 4, 10, 0.05, 0.05, false);
+  const std::vector<Rollout> past = sys.rollouts(rng, 30), now = sys.rollouts(rng, 5);
+  ThreadPool pool(2);
+  GmmSettings settings;
+  Gmm serial, parallel;
+  std::vector<double> serial_history, parallel_history;
+  serial.fit(transitionPoints(past), settings, &serial_history);
+  settings.pool = &pool;
+  parallel.fit(transitionPoints(past), settings, &parallel_history);
+  EXPECT_EQ(serial_history, parallel_history);
+  EXPECT_EQ(serial.weights, parallel.weights);
+  for (int k = 0; k < serial.clusters(); ++k) {
+    EXPECT_EQ(serial.means[k], parallel.means[k]) << k;
+    EXPECT_EQ(serial.covariances[k], parallel.covariances[k]) << k;
+  }
+  DynamicsFitSettings fit_settings;
+  const LgDynamics a = fitDynamics(now, &serial);
+  fit_settings.pool = &pool;
+  const LgDynamics b = fitDynamics(now, &serial, fit_settings);
+  for (int t = 0; t < sys.T; ++t) {
+    EXPECT_EQ(a.Fx[t], b.Fx[t]) << t;
+    EXPECT_EQ(a.Fu[t], b.Fu[t]) << t;
+    EXPECT_EQ(a.f[t], b.f[t]) << t;
+    EXPECT_EQ(a.Sigma[t], b.Sigma[t]) << t;
   }
 }
 

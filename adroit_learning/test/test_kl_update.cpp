@@ -1,8 +1,8 @@
 // The KL-constrained update on random linear-Gaussian problems: the plain LQR equals the
 // textbook Riccati recursion with affine terms (computed here, without the augmented state);
 // the marginals and expected cost match Monte Carlo; the dual descent lands in the KL band
-// (or is slack at eta_min); KL(p || p) = 0 and the KL grows with epsilon; indefinite costs
-// fall back to a larger eta; the step-size rule.
+// (or is slack at eta_min) in few evaluations; KL(p || p) = 0 and the KL grows with epsilon; indefinite costs
+// fall back to a larger eta; a thread pool gives the same update; the step-size rule.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -192,6 +192,69 @@ TEST(KlUpdate, DualDescentLandsInTheKlBandOnRandomProblems) {
       EXPECT_NEAR(expectedCost(cost, m), r.predicted_cost, 1e-9 * (1 + std::abs(r.predicted_cost)));
     }
   }
+}
+
+TEST(KlUpdate, DualDescentNeedsFewEvaluations) {
+  // The secant of log KL over log eta: few evaluations from eta_init = 1, fewer still warm
+  // started from the eta and slope of the last update (epsilon changed by the step-size
+  // rule). Geometric bisection took 5.9 and 5.0 on average here; the secant takes 3.2, and
+  // 2.05 warm started (2.7 from the eta alone).
+  int cold = 0, warm = 0, cases = 0;
+  for (unsigned seed = 10; seed < 30; ++seed) {
+    std::mt19937 rng(seed);
+    const int nx = 2 + seed % 5, nu = 1 + seed % 3, T = 5 + 3 * (seed % 4);
+    const LgDynamics dyn = randomDynamics(rng, nx, nu, T);
+    const QuadraticCost cost = randomCost(rng, nx, nu, T);
+    const LgController prev = initialController(nx, nu, T);
+    KlUpdate update(nx, nu, T);
+    for (double epsilon : {0.05, 0.5, 3.0}) {
+      const KlUpdateResult first = update.update(dyn, cost, prev, epsilon);
+      KlUpdateSettings settings;
+      settings.eta_init = first.eta;
+      settings.kl_slope_init = first.kl_slope;
+      const KlUpdateResult next = update.update(dyn, cost, prev, 1.7 * epsilon, settings);
+      ASSERT_TRUE(first.converged && next.converged) << "seed " << seed << " epsilon " << epsilon;
+      cold += first.iterations;
+      warm += next.iterations;
+      ++cases;
+    }
+  }
+  std::cout << "evaluations per update: from eta 1 " << double(cold) / cases << ", warm started "
+            << double(warm) / cases << "\n";
+  EXPECT_LE(cold, 4 * cases);
+  EXPECT_LE(2 * warm, 5 * cases);
+}
+
+TEST(KlUpdate, AThreadPoolGivesTheSameUpdate) {
+  std::mt19937 rng(11);
+  const int nx = 6, nu = 3, T = 20;
+  const LgDynamics dyn = randomDynamics(rng, nx, nu, T);
+  const QuadraticCost cost = randomCost(rng, nx, nu, T);
+  const LgController prev = initialController(nx, nu, T);
+  ThreadPool pool(2);
+  KlUpdateSettings parallel;
+  parallel.pool = &pool;
+  KlUpdate serial_update(nx, nu, T), parallel_update(nx, nu, T);
+  const KlUpdateResult a = serial_update.update(dyn, cost, prev, 0.5);
+  const KlUpdateResult b = parallel_update.update(dyn, cost, prev, 0.5, parallel);
+  ASSERT_TRUE(a.converged && b.converged);
+  EXPECT_EQ(a.eta, b.eta);
+  EXPECT_EQ(a.kl, b.kl);
+  EXPECT_EQ(a.predicted_cost, b.predicted_cost);
+  EXPECT_EQ(a.iterations, b.iterations);
+  for (int t = 0; t < T; ++t) {
+    EXPECT_EQ(a.controller.K[t], b.controller.K[t]) << t;
+    EXPECT_EQ(a.controller.k[t], b.controller.k[t]) << t;
+    EXPECT_EQ(a.controller.covariance(t), b.controller.covariance(t)) << t;
+  }
+  TrajectoryMarginals ma, mb;
+  forwardMarginals(dyn, a.controller, ma);
+  forwardMarginals(dyn, a.controller, mb, &pool);
+  for (int t = 0; t < T; ++t) {
+    EXPECT_EQ(ma.xu_mean[t], mb.xu_mean[t]) << t;
+    EXPECT_EQ(ma.xu_cov[t], mb.xu_cov[t]) << t;
+  }
+  EXPECT_EQ(klDivergence(a.controller, prev, ma), klDivergence(a.controller, prev, mb, &pool));
 }
 
 TEST(KlUpdate, KlGrowsAndPredictedCostFallsWithEpsilon) {

@@ -29,6 +29,7 @@ struct GmmSettings {
   double regularization = 1e-6;   // lambda: covariance = (scatter + lambda I) / weight sum
   std::uint64_t seed = 1;         // start r uses seed + r
   int restarts = 3;               // EM from this many starts; the best objective is kept
+  ThreadPool* pool = nullptr;     // when set: the clusters' E- and M-steps on its workers
 };
 
 // Gaussian mixture with full covariances, fitted by EM. The covariance update with the
@@ -63,6 +64,7 @@ class Gmm {
 struct DynamicsFitSettings {
   double prior_strength = 1.0;    // n0 = m: pseudo-samples of the prior (mean and covariance)
   double regularization = 1e-6;   // added to the (x, u) covariance before conditioning
+  ThreadPool* pool = nullptr;     // when set: the steps on its workers
 };
 
 // Per-step fit of x_{t+1} | x_t, u_t. prior == nullptr: the samples' own Gaussian (needs many

@@ -2,6 +2,7 @@
 
 #include <sys/stat.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -32,6 +33,7 @@ std::string validate(const TrainerSettings& s) {
   if (!(s.initial_state_noise >= 0 && s.initial_state_noise <= 1)) return "initial-state noise must be in [0, 1]";
   if (s.initial_state_noise_from < 0) return "the initial-state noise start iteration must be >= 0";
   if (s.gmm_history < 1) return "gmm_history must be positive";
+  if (s.threads < 0) return "threads must be >= 0 (0 = one per core)";
   return "";
 }
 
@@ -42,10 +44,12 @@ Trainer::Trainer(const TrainingTask& task, const TrainerSettings& settings, Roll
       layout_(task, backend.jointNames(), backend.cylinderNames(), backend.hasObject()),
       joint_range_(backend.jointRanges()),
       rng_(settings.seed),
+      pool_(static_cast<std::size_t>(std::max(0, settings.threads))),
       kl_update_(layout_.nx(), layout_.nu(), task.horizon),
       epsilon_(task.epsilon) {
   const std::string bad = validate(settings);
   if (!bad.empty()) throw std::invalid_argument(bad);
+  settings_.gmm.pool = settings_.dynamics.pool = settings_.kl.pool = &pool_;
   if (static_cast<int>(joint_range_.size()) != layout_.joints())
     throw std::invalid_argument("backend reports " + std::to_string(joint_range_.size()) + " joint ranges for " +
                                 std::to_string(layout_.joints()) + " joints");
@@ -157,15 +161,17 @@ IterationReport Trainer::iterate() {
   start = std::chrono::steady_clock::now();
   try {
     TrajectoryMarginals marginals;
-    forwardMarginals(dynamics, controller_, marginals);
+    forwardMarginals(dynamics, controller_, marginals, &pool_);
     const double expected_old = expectedCost(quadratic, marginals);
     KlUpdateSettings kl = settings_.kl;
     kl.eta_init = eta_;
+    kl.kl_slope_init = kl_slope_;
     KlUpdateResult result = kl_update_.update(dynamics, quadratic, controller_, epsilon_, kl);
     report.kl = result.kl;
     report.eta = result.eta;
     report.kl_converged = result.converged;
     eta_ = result.eta;
+    kl_slope_ = result.kl_slope;
     // The quadratic's constants are dropped, so expected costs are compared as differences.
     previous_expected_ = expected_old;
     previous_predicted_ = result.predicted_cost;

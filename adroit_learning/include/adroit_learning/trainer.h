@@ -29,6 +29,7 @@ struct TrainerSettings {
   double initial_state_noise = 0;   // level s: joints start within +-s/2 of their range
   int initial_state_noise_from = 0; // first iteration with initial-state noise (8.5.1)
   int gmm_history = 3;              // iterations of samples the GMM prior is fitted on
+  int threads = 0;                  // GMM, dynamics fit and KL update workers (0 = one per core)
   GmmSettings gmm;
   DynamicsFitSettings dynamics;
   KlUpdateSettings kl;
@@ -88,10 +89,11 @@ class Trainer {
   std::vector<double> joint_range_;  // rad, per layout joint (for initial-state noise)
   NormalNoise rng_;
   LgController controller_;
+  ThreadPool pool_;  // the update's phases (the rollouts have the backend's own workers)
   KlUpdate kl_update_;
   Gmm gmm_;
   std::deque<std::vector<Rollout>> recent_;  // the last gmm_history iterations' samples
-  double epsilon_, eta_ = 1.0;
+  double epsilon_, eta_ = 1.0, kl_slope_ = -1.0;
   // Step-size adaptation: the last update's expected cost of the old controller and predicted
   // cost of the new one under the fitted dynamics, and the old controller's sample mean.
   bool have_prediction_ = false;

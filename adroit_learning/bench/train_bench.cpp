@@ -155,11 +155,16 @@ int main(int argc, char** argv) {
   std::vector<TaskResult> results;
   for (const auto& t : tasks) results.push_back(train(t, tasks_dir, description_dir, settings, workers));
 
-  std::printf("\n%-28s %12s %12s %10s %16s %14s\n", "task", "rms iter 0", "best rms", "best iter",
-              "first <= 0.05", "compute/roll");
-  for (const auto& r : results)
-    std::printf("%-28s %12.4f %12.4f %10d %16d %14.2f\n", r.task.c_str(), r.initial_rms, r.best_rms, r.best_iteration,
-                r.first_success_iteration, r.compute_s / r.rollout_s);
+  std::printf("\n%-28s %12s %12s %10s %16s %14s\n", "task", "err iter 0", "best err", "best iter",
+              "first pass", "compute/roll");
+  for (const auto& r : results) {
+    if (r.object)  // rotation tasks: the angle error (rad) instead of the joint RMS, first pass without a drop
+      std::printf("%-28s %12.4f %12.4f %10d %16d %14.2f  (angle error)\n", r.task.c_str(), r.initial_angle, r.best_angle,
+                  r.best_angle_iteration, r.first_angle_success_iteration, r.compute_s / r.rollout_s);
+    else
+      std::printf("%-28s %12.4f %12.4f %10d %16d %14.2f\n", r.task.c_str(), r.initial_rms, r.best_rms, r.best_iteration,
+                  r.first_success_iteration, r.compute_s / r.rollout_s);
+  }
   for (const auto& r : results) {
     if (r.object) {
       // Rotation: no joint targets, so the joint RMS criterion does not apply.

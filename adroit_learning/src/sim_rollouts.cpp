@@ -43,6 +43,14 @@ std::vector<double> initialQpos(const mjModel* model, const TrainingTask& task, 
     std::copy(model->key_qpos, model->key_qpos + model->nq, qpos.begin());
   }
   for (const auto& [name, value] : task.initial_joints) qpos[model->jnt_qposadr[jointId(model, name)]] = value;
+  if (!task.initial_object_position.empty()) {
+    // The free joint of body "object" (the driver's object convention).
+    const int object = mj_name2id(model, mjOBJ_BODY, "object");
+    if (object < 0 || model->body_jntnum[object] != 1 || model->jnt_type[model->body_jntadr[object]] != mjJNT_FREE)
+      throw TaskError("task '" + task.name + "': initial_object_position, but the model has no free body 'object'");
+    const int adr = model->jnt_qposadr[model->body_jntadr[object]];
+    std::copy(task.initial_object_position.begin(), task.initial_object_position.end(), qpos.begin() + adr);
+  }
   for (std::size_t i = 0; i < joints.size(); ++i) {
     const int j = jointId(model, joints[i]);
     double& q = qpos[model->jnt_qposadr[j]];

@@ -80,6 +80,7 @@ class Reader {
 
 const std::set<std::string> kKnownFields = {
     "name", "description", "scene", "horizon", "control_dt", "initial_keyframe", "initial_joints",
+    "initial_object_position",
     "initial_pressure", "target_joints", "joint_weight", "final_joint_weight", "action_weight",
     "object_position_weight", "object_rotation_weight", "final_scale", "rotation_axis", "rotation_target",
     "locked_cylinders", "locked_command", "initial_command", "initial_variance", "epsilon",
@@ -112,6 +113,14 @@ TrainingTask loadTrainingTask(const std::string& path) {
   task.control_dt = r.number("control_dt", 1e-3, 1.0, true, 0);
   task.initial_keyframe = r.text("initial_keyframe", false);
   task.initial_joints = r.jointMap("initial_joints");
+  if (const YAML::Node p = r.node("initial_object_position")) {
+    if (!p.IsSequence() || p.size() != 3) r.fail("initial_object_position", "expected [x, y, z] (m)");
+    for (int i = 0; i < 3; ++i) {
+      const double v = r.number(p[i], "initial_object_position");
+      if (std::abs(v) > 10) r.fail("initial_object_position", "must be within 10 m of the origin");
+      task.initial_object_position.push_back(v);
+    }
+  }
   task.initial_pressure = r.number("initial_pressure", 101325.0, 700e3, false, task.initial_pressure);
   task.target_joints = r.jointMap("target_joints");
   task.joint_weight = r.number("joint_weight", 0, 1e6, false, task.joint_weight);
@@ -162,6 +171,8 @@ TrainingTask loadTrainingTask(const std::string& path) {
   task.success_joint_rms = r.number("success_joint_rms", 0, 10, false, task.success_joint_rms);
   task.success_angle = r.number("success_angle", 0, 10, false, task.success_angle);
   task.drop_height = r.number("drop_height", -1e9, 10, false, task.drop_height);
+  if (!task.initial_object_position.empty() && !task.uses_object())
+    r.fail("initial_object_position", "only for tasks with object cost terms");
   if (task.target_joints.empty() && !task.uses_object())
     r.fail("target_joints", "a task without object terms needs joint targets");
   return task;

@@ -3,6 +3,7 @@
 // and a controller that produces non-finite commands is reported, not run.
 #include <adroit_learning/sim_rollouts.h>
 #include <gtest/gtest.h>
+#include <mujoco/mujoco.h>
 
 #include <limits>
 
@@ -85,4 +86,27 @@ TEST(SimRollouts, NonFiniteControllerAndCancelAreReported) {
   f.cancel = true;
   results = f.sim.run(f.task, f.layout, f.controller, {f.request(5), f.request(6)}, f.cancel);
   for (const auto& r : results) EXPECT_EQ(r.error, "cancelled");
+}
+
+TEST(SimRollouts, InitialObjectPositionMovesTheObjectOnly) {
+  char error[1000] = "";
+  mjModel* model = mj_loadXML((std::string(ADROIT_MJCF_DIR) + "/tube.xml").c_str(), nullptr, error, sizeof(error));
+  ASSERT_NE(model, nullptr) << error;
+  adroit::TrainingTask task;
+  task.name = "t";
+  const std::vector<double> keyframe = adroit::initialQpos(model, task, {}, {});
+  task.initial_object_position = {0.01, -0.2, 0.3};
+  const std::vector<double> moved = adroit::initialQpos(model, task, {}, {});
+  const int body = mj_name2id(model, mjOBJ_BODY, "object");
+  ASSERT_GE(body, 0);
+  const int adr = model->jnt_qposadr[model->body_jntadr[body]];
+  for (int i = 0; i < model->nq; ++i) {
+    if (i >= adr && i < adr + 3) EXPECT_DOUBLE_EQ(moved[i], task.initial_object_position[i - adr]);
+    else EXPECT_DOUBLE_EQ(moved[i], keyframe[i]) << i;  // joints and the object's orientation
+  }
+  mjModel* hand = mj_loadXML((std::string(ADROIT_MJCF_DIR) + "/hand.xml").c_str(), nullptr, error, sizeof(error));
+  ASSERT_NE(hand, nullptr) << error;
+  EXPECT_THROW(adroit::initialQpos(hand, task, {}, {}), adroit::TaskError);
+  mj_deleteModel(hand);
+  mj_deleteModel(model);
 }

@@ -86,3 +86,17 @@ TEST(TrainingTask, ScheduleSwitchesAtItsFractions) {
   EXPECT_DOUBLE_EQ(s.at(5, 10), -1.0);
   EXPECT_DOUBLE_EQ(s.at(10, 10), -1.0);
 }
+
+TEST(TrainingTask, InitialObjectPositionIsOptionalAndChecked) {
+  const std::string object = "name: t\nscene: tube\nhorizon: 10\ncontrol_dt: 0.04\nobject_rotation_weight: 10\n";
+  EXPECT_TRUE(adroit::loadTrainingTask(writeTemp("ok.yaml", object)).initial_object_position.empty());
+  const auto task = adroit::loadTrainingTask(writeTemp("ok.yaml", object + "initial_object_position: [0.1, -0.2, 0.3]\n"));
+  ASSERT_EQ(task.initial_object_position.size(), 3u);
+  EXPECT_DOUBLE_EQ(task.initial_object_position[1], -0.2);
+  std::string e = loadError(object + "initial_object_position: [0.1, 0.2]\n");
+  EXPECT_NE(e.find("initial_object_position: expected [x, y, z]"), std::string::npos) << e;
+  e = loadError(object + "initial_object_position: [0, 0, .inf]\n");
+  EXPECT_NE(e.find("initial_object_position: not finite"), std::string::npos) << e;
+  e = loadError(std::string(kMinimal) + "initial_object_position: [0, 0, 0.1]\n");
+  EXPECT_NE(e.find("initial_object_position: only for tasks with object"), std::string::npos) << e;
+}

@@ -33,6 +33,9 @@ struct TrainingTask {
   // Initial state: a keyframe of the scene, then joint overrides (rad).
   std::string initial_keyframe;
   std::map<std::string, double> initial_joints;
+  // Optional object start (world position, m) replacing the keyframe's object position; the
+  // object's orientation stays the keyframe's. Empty: the keyframe's object position.
+  std::vector<double> initial_object_position;
 
   // Cost (thesis 8.4.1, 8.4.2):
   //   l_t = w_q ||q - q*||^2 + w_u ||u||^2 + w_p ||p_obj - p*||^2 + w_r (angle_obj - angle*(t))^2

@@ -100,6 +100,12 @@ bool DriverConnection::waitForStreams(std::string& error) {
   return false;
 }
 
+bool DriverConnection::publishesObject() {
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(1.0);
+  while (odom_sub_.getNumPublishers() == 0 && ros::WallTime::now() < deadline) ros::WallDuration(0.01).sleep();
+  return odom_sub_.getNumPublishers() > 0;
+}
+
 std::vector<std::string> DriverConnection::jointNames() {
   std::lock_guard<std::mutex> lock(mutex_);
   return joints_ ? joints_->name : std::vector<std::string>{};
@@ -218,6 +224,12 @@ DriverRollouts::DriverRollouts(ros::NodeHandle& nh, const std::vector<std::strin
     throw std::runtime_error("driver " + drivers_.front()->ns() + " has " + std::to_string(cylinders_.size()) +
                              " cylinders, the task's scene " + std::to_string(model_->nu));
   for (int j = 0; j < model_->njnt; ++j) has_object_ = has_object_ || model_->jnt_type[j] == mjJNT_FREE;
+  // The hand and tube scenes share joints and cylinders: the object stream tells them apart.
+  for (auto& d : drivers_)
+    if (d->publishesObject() != has_object_)
+      throw std::runtime_error("driver " + d->ns() + (has_object_ ? " publishes no object odometry, but the task's scene has an object"
+                                                                  : " publishes object odometry, but the task's scene has none") +
+                               ": start the driver with the task's scene");
 }
 
 std::vector<double> DriverRollouts::jointRanges() const { return adroit::jointRanges(model_.get(), joints_); }

@@ -33,6 +33,8 @@ class DriverConnection {
   const std::string& ns() const { return ns_; }
   // Waits (up to the timeout) until the driver has published joint and actuator states.
   bool waitForStreams(std::string& error);
+  // Whether the driver publishes object odometry (waits up to 1 s for the connection).
+  bool publishesObject();
   std::vector<std::string> jointNames();
   std::vector<std::string> cylinderNames();
   // Pause (lockstep stepping needs it), reset to qpos/pressure, then two physics steps with

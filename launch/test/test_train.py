@@ -102,6 +102,15 @@ class TrainThroughDriver(unittest.TestCase):
         self.assertIn("none.tvlg", r.message)
         self.assertEqual(self.status().state, "finished")  # nothing else disturbed
 
+    def test_4_a_task_of_another_scene_fails_clearly(self):
+        # The driver runs the hand scene; the tube tasks have the same joints but an object.
+        r = self.train(task="rotate_vertical_cw", iterations=2, output_dir=os.path.join(self.out, "tube"))
+        self.assertTrue(r.accepted, r.message)
+        self.assertTrue(wall_wait(lambda: self.status().state != "running", 60))
+        status = self.status()
+        self.assertEqual(status.state, "failed")
+        self.assertIn("start the driver with the task's scene", status.message)
+
 
 if __name__ == "__main__":
     rospy.init_node("test_train")

@@ -19,8 +19,9 @@ typedef struct mjModel_ mjModel;
 namespace adroit {
 
 // The task's initial qpos on `model`: the keyframe (or the model default), the task's joint
-// overrides and object position (initial_object_position, body "object"), then `joint_offset` (per entry of `joints`, may be empty), every robot joint
-// clamped to its range. Throws TaskError for an unknown keyframe or joint.
+// overrides and object position (initial_object_position, body "object"), then
+// `joint_offset` (per entry of `joints`, may be empty), every robot joint clamped to its
+// range. Throws TaskError for an unknown keyframe or joint.
 std::vector<double> initialQpos(const mjModel* model, const TrainingTask& task, const std::vector<std::string>& joints,
                                 const std::vector<double>& joint_offset);
 // Ranges (hi - lo, rad) of the named 1-DOF joints.

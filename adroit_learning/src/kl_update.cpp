@@ -163,9 +163,9 @@ KlUpdate::KlUpdate(int nx, int nu, int horizon)
       horizon_(horizon),
       lq_(nx + 1, nu, horizon),
       pass_(nx + 1, nu, horizon),
-      inverse_(1, Eigen::MatrixXd(nu, nu)),
-      llt_(1, Eigen::LLT<Eigen::MatrixXd>(nu)) {
+      inverse_(1, Eigen::MatrixXd(nu, nu)) {
   gains_.resize(nx + 1, nu, horizon);
+  sizeWorkspaces(nullptr);
 }
 
 void KlUpdate::checkSizes(const LgDynamics& dyn, const QuadraticCost& cost, const LgController* prev) const {
@@ -204,9 +204,12 @@ void KlUpdate::loadDynamics(const LgDynamics& dyn) {
 
 void KlUpdate::sizeWorkspaces(ThreadPool* pool) {
   const std::size_t workers = workerCount(pool);
-  if (inverse_.size() < workers) {
-    inverse_.resize(workers, Eigen::MatrixXd(nu_, nu_));
-    llt_.resize(workers, Eigen::LLT<Eigen::MatrixXd>(nu_));
+  if (inverse_.size() < workers) inverse_.resize(workers, Eigen::MatrixXd(nu_, nu_));
+  // An LLT that has factored nothing has an uninitialised status, which copying it (when the
+  // vector grows) reads (UBSan: invalid enum load): each one factors the identity once.
+  while (llt_.size() < workers) {
+    llt_.emplace_back(nu_);
+    llt_.back().compute(Eigen::MatrixXd::Identity(nu_, nu_));
   }
 }
 

@@ -1,7 +1,9 @@
 #include "adroit_description/scenes.h"
 
 #include <algorithm>
+#include <cstdlib>
 #include <fstream>
+#include <sstream>
 #include <stdexcept>
 
 namespace adroit {
@@ -37,6 +39,24 @@ std::string urdfFile(const std::string& share_dir, const std::string& scene) {
   requireScene(share_dir, scene);
   return share_dir + "/urdf/" + scene + ".urdf";
 }
+
+std::string packageShareDir(const std::string& package, const std::string& marker) {
+  for (const char* variable : {"CMAKE_PREFIX_PATH", "ROS_PACKAGE_PATH"}) {
+    const char* value = std::getenv(variable);
+    if (!value) continue;
+    std::stringstream list(value);
+    std::string prefix;
+    while (std::getline(list, prefix, ':')) {
+      if (prefix.empty()) continue;
+      for (const std::string& dir : {prefix + "/share/" + package, prefix + "/" + package})
+        if (std::ifstream(dir + "/" + marker).good()) return dir;
+    }
+  }
+  throw std::runtime_error(package + " not found on CMAKE_PREFIX_PATH or ROS_PACKAGE_PATH (source the workspace's "
+                           "setup.bash)");
+}
+
+std::string descriptionShareDir() { return packageShareDir("adroit_description", "scenes.txt"); }
 
 }  // namespace description
 }  // namespace adroit

@@ -2,7 +2,10 @@
 // simulates without runtime warnings, and bad input fails with one clear line.
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
+
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <set>
 
@@ -218,4 +221,25 @@ TEST(BadInput, ReportQuotesMujocoOnMalformedOrMissingFile) {
   EXPECT_NE(r.status, 0);
   EXPECT_EQ(lines(r.output), 1) << r.output;
   std::system(("rm -rf " + d).c_str());
+}
+
+TEST(Scenes, PackageShareDirSearchesThePrefixPaths) {
+  // Two prefixes: the package's share directory with the marker is in the second one; a
+  // ROS_PACKAGE_PATH entry holds the package directly (a source tree).
+  const std::string root = std::string(::testing::TempDir()) + "/share_dir_test";
+  for (const std::string dir : {root, root + "/a", root + "/b", root + "/b/share", root + "/b/share/pkgx", root + "/src",
+                                root + "/src/pkgy"})
+    ::mkdir(dir.c_str(), 0755);
+  std::ofstream(root + "/b/share/pkgx/marker.txt") << "x";
+  std::ofstream(root + "/src/pkgy/other.txt") << "y";
+  ::setenv("CMAKE_PREFIX_PATH", (root + "/a::" + root + "/b").c_str(), 1);
+  ::setenv("ROS_PACKAGE_PATH", (root + "/src").c_str(), 1);
+  EXPECT_EQ(adroit::description::packageShareDir("pkgx", "marker.txt"), root + "/b/share/pkgx");
+  EXPECT_EQ(adroit::description::packageShareDir("pkgy", "other.txt"), root + "/src/pkgy");
+  try {
+    adroit::description::packageShareDir("pkgx", "no_such_marker.txt");
+    FAIL() << "no error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("CMAKE_PREFIX_PATH"), std::string::npos) << e.what();
+  }
 }

@@ -70,9 +70,7 @@ void setDriverParams(const std::string& ns, const std::string& scene, bool realt
 }
 
 void result(const std::string& figure, double value, const std::string& unit, const std::string& op, double target) {
-  const bool pass = op == "<=" ? value <= target : value >= target;
-  std::printf("RESULT adroit_driver/%s %.4g %s target %s %g %s\n", figure.c_str(), value, unit.c_str(), op.c_str(),
-              target, pass ? "PASS" : "FAIL");
+  std::printf("%s\n", adroit::resultLine("adroit_driver", figure, value, unit, op, target).c_str());
 }
 
 // The controls (tensions) the core applies at each step of the trajectory, so that the

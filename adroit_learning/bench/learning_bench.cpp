@@ -60,32 +60,7 @@ constexpr int kDriverStepsPerControl = 5;  // 10 ms control step of 2 ms driver 
 std::vector<std::string> g_results;
 
 void result(const std::string& name, double value, const char* unit, const char* op, double target) {
-  bool pass = false;
-  if (!std::strcmp(op, "<=")) pass = value <= target;
-  else if (!std::strcmp(op, "<")) pass = value < target;
-  else if (!std::strcmp(op, ">=")) pass = value >= target;
-  char line[512];
-  std::snprintf(line, sizeof line, "RESULT adroit_learning/%s %.4g %s target %s %.4g %s", name.c_str(), value, unit, op,
-                target, pass ? "PASS" : "FAIL");
-  g_results.push_back(line);
-}
-
-// Where adroit_description's share directory is: CMAKE_PREFIX_PATH / ROS_PACKAGE_PATH of the
-// sourced workspace (as adroit_mpc's benchmarks find it).
-std::string descriptionShareDir() {
-  for (const char* variable : {"CMAKE_PREFIX_PATH", "ROS_PACKAGE_PATH"}) {
-    const char* value = std::getenv(variable);
-    if (!value) continue;
-    std::stringstream list(value);
-    std::string prefix;
-    while (std::getline(list, prefix, ':')) {
-      if (prefix.empty()) continue;
-      for (const std::string& dir : {prefix + "/share/adroit_description", prefix + "/adroit_description"})
-        if (std::ifstream(dir + "/scenes.txt").good()) return dir;
-    }
-  }
-  throw std::runtime_error("adroit_description not found on CMAKE_PREFIX_PATH or ROS_PACKAGE_PATH (source the "
-                           "workspace's setup.bash)");
+  g_results.push_back(adroit::resultLine("adroit_learning", name, value, unit, op, target));
 }
 
 // ---------------------------------------------------------------- the synthetic system
@@ -197,7 +172,7 @@ class SimBaseline {
  public:
   SimBaseline(const std::string& scene, std::uint64_t seed) : rng_(seed) {
     adroit::driver::SimConfig config;
-    config.model_path = adroit::description::sceneFile(descriptionShareDir(), scene, false);
+    config.model_path = adroit::description::sceneFile(adroit::description::descriptionShareDir(), scene, false);
     config.mode = adroit::driver::ActuationMode::kPneumatic;
     config.initial_keyframe = "rest";
     robot_ = std::make_unique<adroit::driver::SimulatedRobot>(config);

@@ -24,17 +24,6 @@
 
 namespace {
 
-// The first prefix on CMAKE_PREFIX_PATH holding `share/<package>/<marker>`.
-std::string shareDir(const std::string& package, const std::string& marker) {
-  const char* value = std::getenv("CMAKE_PREFIX_PATH");
-  std::stringstream list(value ? value : "");
-  for (std::string prefix; std::getline(list, prefix, ':');) {
-    const std::string dir = prefix + "/share/" + package;
-    if (std::ifstream(dir + "/" + marker).good()) return dir;
-  }
-  throw std::runtime_error(package + " not found on CMAKE_PREFIX_PATH (source the workspace's setup.bash)");
-}
-
 std::vector<std::string> split(const std::string& s) {
   std::vector<std::string> out;
   std::stringstream in(s);
@@ -105,8 +94,9 @@ TaskResult train(const std::string& name, const std::string& tasks_dir, const st
     res.rollout_s += r.rollout_s;
     ++res.iterations;
   }
-  const std::string plot = "/usr/bin/python3 '" + shareDir("adroit_learning", "scripts/plot_learning_curve.py") +
-                           "/scripts/plot_learning_curve.py' '" + settings.output_dir + "/learning_curve.csv' '" +
+  const std::string script = "scripts/plot_learning_curve.py";
+  const std::string plot = "/usr/bin/python3 '" + adroit::description::packageShareDir("adroit_learning", script) +
+                           "/" + script + "' '" + settings.output_dir + "/learning_curve.csv' '" +
                            settings.output_dir + "/learning_curve.png' '" + name + "'";
   if (std::system(plot.c_str()) != 0) std::printf("(plot not written: %s)\n", plot.c_str());
   return res;
@@ -150,8 +140,10 @@ int main(int argc, char** argv) {
     return 2;
   }
   settings.output_dir = out;
-  const std::string tasks_dir = shareDir("adroit_learning", "config/tasks/position_with_gravity.yaml") + "/config/tasks";
-  const std::string description_dir = shareDir("adroit_description", "scenes.txt");
+  const std::string tasks_dir =
+      adroit::description::packageShareDir("adroit_learning", "config/tasks/position_with_gravity.yaml") +
+      "/config/tasks";
+  const std::string description_dir = adroit::description::descriptionShareDir();
   std::vector<TaskResult> results;
   for (const auto& t : tasks) results.push_back(train(t, tasks_dir, description_dir, settings, workers));
 

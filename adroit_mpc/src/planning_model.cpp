@@ -105,23 +105,6 @@ adroit::ModelPtr loadUnprunedPlanningModel(const std::string& path, const Planni
   return std::move(loaded.model);
 }
 
-std::string packageShareDir(const std::string& package, const std::string& marker) {
-  for (const char* variable : {"CMAKE_PREFIX_PATH", "ROS_PACKAGE_PATH"}) {
-    const char* value = std::getenv(variable);
-    if (!value) continue;
-    std::stringstream list(value);
-    std::string prefix;
-    while (std::getline(list, prefix, ':')) {
-      if (prefix.empty()) continue;
-      for (const std::string& dir : {prefix + "/share/" + package, prefix + "/" + package})
-        if (std::ifstream(dir + "/" + marker).good()) return dir;
-    }
-  }
-  throw std::runtime_error(package + " not found on CMAKE_PREFIX_PATH or ROS_PACKAGE_PATH (source the workspace's "
-                           "setup.bash)");
-}
-
-std::string descriptionShareDir() { return packageShareDir("adroit_description", "scenes.txt"); }
 
 int activeContacts(const mjData* d) {
   int active = 0;

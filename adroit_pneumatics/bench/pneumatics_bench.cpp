@@ -96,14 +96,8 @@ std::ofstream openCsv(const std::string& name) {
 }
 
 void result(const std::string& name, double value, const char* unit, const char* op, double target) {
-  bool pass = false;
-  if (!std::strcmp(op, "<=")) pass = value <= target;
-  else if (!std::strcmp(op, "<")) pass = value < target;
-  else if (!std::strcmp(op, ">=")) pass = value >= target;
-  char line[512];
-  std::snprintf(line, sizeof line, "RESULT adroit_pneumatics/%s %.4g %s target %s %.4g %s", name.c_str(), value, unit, op,
-                target, pass ? "PASS" : "FAIL");
-  std::printf("%s\n", line);
+  const std::string line = adroit::resultLine("adroit_pneumatics", name, value, unit, op, target);
+  std::printf("%s\n", line.c_str());
   g_results.push_back(line);
 }
 

@@ -18,5 +18,12 @@ std::string sceneFile(const std::string& share_dir, const std::string& scene, bo
 // Path of the URDF of the robot in that scene (mount pose included).
 std::string urdfFile(const std::string& share_dir, const std::string& scene);
 
+// For ROS-free programs and tests: the first share/<package> (or <package>) directory of a
+// prefix on CMAKE_PREFIX_PATH, then ROS_PACKAGE_PATH, that holds the file `marker`. Throws
+// std::runtime_error naming the variables searched.
+std::string packageShareDir(const std::string& package, const std::string& marker);
+// adroit_description's own (the one with scenes.txt): where the generated models are.
+std::string descriptionShareDir();
+
 }  // namespace description
 }  // namespace adroit

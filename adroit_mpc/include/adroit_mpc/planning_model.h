@@ -4,6 +4,7 @@
 #pragma once
 
 #include <adroit_core/mujoco_model.h>
+#include <adroit_description/scenes.h>
 
 #include <mujoco/mujoco.h>
 
@@ -44,12 +45,9 @@ adroit::ModelPtr loadPlanningModel(const std::string& path, const PlanningModelS
 std::string unprunedXml(const std::string& xml);
 adroit::ModelPtr loadUnprunedPlanningModel(const std::string& path, const PlanningModelSettings& settings);
 
-// share/adroit_description of the first prefix on CMAKE_PREFIX_PATH (or ROS_PACKAGE_PATH)
-// that holds scenes.txt: where ROS-free programs and tests find the generated models.
-// Throws std::runtime_error naming the variables searched.
-std::string descriptionShareDir();
-// The same for any installed package: the first share/<package> that holds `marker`.
-std::string packageShareDir(const std::string& package, const std::string& marker);
+// Where ROS-free programs and tests find installed files (adroit_description/scenes.h).
+using adroit::description::descriptionShareDir;
+using adroit::description::packageShareDir;
 
 // Contact points of the last collision pass that entered the constraint set (within their
 // margin, not excluded): what the solver pays for.

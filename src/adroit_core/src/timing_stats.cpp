@@ -30,6 +30,19 @@ Summary SampleStats::summary() const {
   return s;
 }
 
+std::string resultLine(const std::string& scope, const std::string& name, double value, const std::string& unit,
+                       const std::string& op, double target) {
+  const bool pass = op == "<=" ? value <= target
+                    : op == "<" ? value < target
+                    : op == ">=" ? value >= target
+                    : op == ">" ? value > target
+                                : false;
+  char buf[512];
+  std::snprintf(buf, sizeof(buf), "RESULT %s/%s %.4g %s target %s %.4g %s", scope.c_str(), name.c_str(), value,
+                unit.c_str(), op.c_str(), target, pass ? "PASS" : "FAIL");
+  return buf;
+}
+
 std::string formatSummary(const Summary& s, double scale, const std::string& unit) {
   char buf[160];
   std::snprintf(buf, sizeof(buf), "min %.3g / median %.3g / p99 %.3g / max %.3g %s", s.min * scale,

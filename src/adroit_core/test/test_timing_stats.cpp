@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <thread>
 
 #include "adroit_core/timing_stats.h"
@@ -38,4 +39,14 @@ TEST(TimingStats, StopwatchMeasuresSleep) {
 TEST(TimingStats, FormatsScaled) {
   adroit::Summary s{3, 0.001, 0.002, 0.002, 0.003, 0.004};
   EXPECT_EQ(adroit::formatSummary(s, 1e3, "ms"), "min 1 / median 2 / p99 3 / max 4 ms");
+}
+
+TEST(TimingStats, ResultLinePassesOnlyOnTheRightSideOfTheTarget) {
+  EXPECT_EQ(adroit::resultLine("pkg", "lag_p99", 0.5, "ms", "<=", 1.0), "RESULT pkg/lag_p99 0.5 ms target <= 1 PASS");
+  EXPECT_EQ(adroit::resultLine("pkg", "x", 1.0, "s", "<=", 1.0), "RESULT pkg/x 1 s target <= 1 PASS");
+  EXPECT_NE(adroit::resultLine("pkg", "x", 1.0, "s", "<", 1.0).find("FAIL"), std::string::npos);
+  EXPECT_NE(adroit::resultLine("pkg", "x", 2.0, "", ">=", 3.0).find("FAIL"), std::string::npos);
+  EXPECT_NE(adroit::resultLine("pkg", "x", 4.0, "", ">", 3.0).find("PASS"), std::string::npos);
+  EXPECT_NE(adroit::resultLine("pkg", "x", 4.0, "", "==", 4.0).find("FAIL"), std::string::npos);  // unknown op
+  EXPECT_NE(adroit::resultLine("pkg", "x", std::nan(""), "", "<=", 4.0).find("FAIL"), std::string::npos);
 }

@@ -49,4 +49,10 @@ class Stopwatch {
 // "min 1.2 / median 1.5 / p99 3.0 / max 4.1 <unit>" with values multiplied by `scale`.
 std::string formatSummary(const Summary& s, double scale, const std::string& unit);
 
+// A benchmark's RESULT line (DESIGN.md section 5):
+//   "RESULT <scope>/<name> <value> <unit> target <op> <target> PASS|FAIL", op one of <=, <, >=, >.
+// An unknown op never passes.
+std::string resultLine(const std::string& scope, const std::string& name, double value, const std::string& unit,
+                       const std::string& op, double target);
+
 }  // namespace adroit

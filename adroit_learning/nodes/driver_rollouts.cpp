@@ -20,11 +20,14 @@ constexpr double kStampSlack = 0.0045;
 // Physics steps after a reset, on the hold command: every stream has published the reset
 // state by then (SimRollouts settles the same way).
 constexpr int kSettleSteps = 2;
+// Realtime: how often the keep-alive re-sends the hold command between rollouts (the driver's
+// command watchdog trips after 50 ms without a command).
+constexpr double kKeepAlivePeriod = 0.01;
 
 }  // namespace
 
-DriverConnection::DriverConnection(ros::NodeHandle& nh, const std::string& ns, double timeout)
-    : ns_(ns), timeout_(timeout) {
+DriverConnection::DriverConnection(ros::NodeHandle& nh, const std::string& ns, double timeout, Pacing pacing)
+    : ns_(ns), timeout_(timeout), pacing_(pacing) {
   ros::NodeHandle d(nh, ns);
   const ros::TransportHints hints = ros::TransportHints().tcpNoDelay();
   joints_sub_ = d.subscribe("joint_states", 20, &DriverConnection::onJoints, this, hints);
@@ -35,6 +38,33 @@ DriverConnection::DriverConnection(ros::NodeHandle& nh, const std::string& ns, d
   step_client_ = d.serviceClient<adroit_msgs::Step>("step", true);
   reset_client_ = d.serviceClient<adroit_msgs::Reset>("reset", true);
   pause_client_ = d.serviceClient<std_srvs::SetBool>("pause", true);
+  if (pacing_ == Pacing::kRealtime) keep_alive_ = std::thread(&DriverConnection::keepAlive, this);
+}
+
+DriverConnection::~DriverConnection() {
+  // Realtime: when the keep-alive ends the driver's command watchdog takes it to its safe
+  // state, as it must on hardware. A simulation driver is paused instead (its watchdog runs on
+  // its clock), and the next job starts it again.
+  if (pacing_ == Pacing::kRealtime && holding_.load()) {
+    std_srvs::SetBool pause;
+    pause.request.data = true;
+    if (!pause_client_.exists() || !pause_client_.call(pause) || !pause.response.success)
+      ROS_WARN("adroit_learning: driver %s cannot be paused: without the trainer's commands its watchdog takes it to "
+               "its safe state",
+               ns_.c_str());
+  }
+  stop_.store(true);
+  if (keep_alive_.joinable()) keep_alive_.join();
+}
+
+// Its own thread on wall time, so a stalled callback queue or a long update never starves it.
+void DriverConnection::keepAlive() {
+  while (!stop_.load()) {
+    std::this_thread::sleep_for(std::chrono::duration<double>(kKeepAlivePeriod));
+    if (!holding_.load()) continue;
+    std::lock_guard<std::mutex> lock(command_mutex_);
+    if (holding_.load() && !hold_volts_.empty()) publish(hold_volts_);
+  }
 }
 
 void DriverConnection::onJoints(const sensor_msgs::JointState::ConstPtr& msg) {
@@ -67,6 +97,37 @@ bool DriverConnection::safe(std::string& error) {
 
 bool DriverConnection::waitForStreams(std::string& error) {
   const auto have = [&] { return joints_ && actuators_; };
+  if (pacing_ == Pacing::kRealtime) {
+    // Realtime pacing needs a running driver: a paused simulation driver is started (hardware
+    // has no pause service). Only once our topics are connected both ways: the hold command
+    // below must reach it within its watchdog time after the start.
+    const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(timeout_);
+    while (joints_sub_.getNumPublishers() == 0 || actuators_sub_.getNumPublishers() == 0 ||
+           valve_pub_.getNumSubscribers() == 0) {
+      if (ros::WallTime::now() > deadline) {
+        error = "driver " + ns_ + ": joint_states / actuator_states / valve_command not connected within " +
+                std::to_string(timeout_) + " s";
+        return false;
+      }
+      ros::WallDuration(0.01).sleep();
+    }
+    std_srvs::SetBool run;
+    run.request.data = false;
+    if (pause_client_.waitForExistence(ros::Duration(std::min(timeout_, 1.0)))) pause_client_.call(run);
+    std::unique_lock<std::mutex> lock(mutex_);
+    if (cv_.wait_for(lock, std::chrono::duration<double>(timeout_), have)) {
+      // From now on the valves are held (0 V: sealed) until a rollout commands them, so
+      // neither the checks before the first reset nor the first update trip the watchdog.
+      std::lock_guard<std::mutex> command_lock(command_mutex_);
+      hold_volts_.assign(actuators_->name.size(), 0.0);
+      publish(hold_volts_);
+      holding_.store(true);
+      return true;
+    }
+    error = "driver " + ns_ + ": no joint_states / actuator_states within " + std::to_string(timeout_) +
+            " s (realtime pacing needs a running driver)";
+    return false;
+  }
   {
     std::unique_lock<std::mutex> lock(mutex_);
     if (cv_.wait_for(lock, std::chrono::duration<double>(std::min(timeout_, 1.0)), have)) return true;
@@ -119,11 +180,13 @@ std::vector<std::string> DriverConnection::cylinderNames() {
 bool DriverConnection::reset(const std::vector<double>& qpos, const std::vector<double>& pressure, double hold_volts,
                              std::string& error) {
   if (!safe(error)) return false;
-  std_srvs::SetBool pause;
-  pause.request.data = true;
-  if (!pause_client_.call(pause) || !pause.response.success) {
-    error = "driver " + ns_ + ": pause failed: " + pause.response.message;
-    return false;
+  if (pacing_ == Pacing::kLockstep) {  // stepping needs a paused driver
+    std_srvs::SetBool pause;
+    pause.request.data = true;
+    if (!pause_client_.call(pause) || !pause.response.success) {
+      error = "driver " + ns_ + ": pause failed: " + pause.response.message;
+      return false;
+    }
   }
   adroit_msgs::Reset reset;
   reset.request.qpos = qpos;
@@ -132,6 +195,16 @@ bool DriverConnection::reset(const std::vector<double>& qpos, const std::vector<
     error = "driver " + ns_ + ": reset refused: " + reset.response.message;
     return false;
   }
+  if (pacing_ == Pacing::kRealtime) {
+    reset_floor_ = ros::Time::now();  // states stamped before now may show the old state
+    {
+      std::lock_guard<std::mutex> lock(command_mutex_);
+      hold_volts_.assign(pressure.size(), hold_volts);
+      publish(hold_volts_);
+    }
+    holding_.store(true);
+    return true;
+  }
   // A few physics steps on the hold command: afterwards every stream shows the reset state,
   // and nothing stamped before the reset counts as fresh.
   reset_floor_ = sim_time_;
@@ -139,6 +212,22 @@ bool DriverConnection::reset(const std::vector<double>& qpos, const std::vector<
 }
 
 bool DriverConnection::send(const std::vector<double>& volts, std::string& error) {
+  std::lock_guard<std::mutex> lock(command_mutex_);
+  holding_.store(false);
+  publish(volts);
+  (void)error;
+  return true;
+}
+
+void DriverConnection::hold() {
+  if (pacing_ != Pacing::kRealtime) return;
+  // At once: the rollout's last command is already a control step old.
+  std::lock_guard<std::mutex> lock(command_mutex_);
+  if (!hold_volts_.empty()) publish(hold_volts_);
+  holding_.store(true);
+}
+
+void DriverConnection::publish(const std::vector<double>& volts) {
   command_.index.resize(volts.size());
   for (std::size_t i = 0; i < volts.size(); ++i) command_.index[i] = static_cast<std::uint16_t>(i);
   command_.volts = volts;
@@ -149,8 +238,15 @@ bool DriverConnection::send(const std::vector<double>& volts, std::string& error
   last_stamp_ = stamp;
   command_.header.stamp = stamp;
   valve_pub_.publish(command_);
-  (void)error;
-  return true;
+}
+
+bool DriverConnection::advance(int steps, double dt, std::string& error) {
+  if (pacing_ == Pacing::kLockstep) return step(steps, error);
+  next_tick_ += ros::Duration(dt);
+  const ros::Duration wait = next_tick_ - ros::Time::now();
+  if (wait > ros::Duration(0)) wait.sleep();
+  else if (-wait.toSec() > 0.5 * dt) ++late_ticks_;
+  return safe(error);
 }
 
 bool DriverConnection::step(int steps, std::string& error) {
@@ -169,8 +265,14 @@ bool DriverConnection::step(int steps, std::string& error) {
   return safe(error);
 }
 
-bool DriverConnection::observe(const ros::Time& since, Observation& obs, std::string& error) {
-  ros::Time min_stamp = since - ros::Duration(kStampSlack);
+bool DriverConnection::observe(int t, Observation& obs, std::string& error) {
+  if (pacing_ == Pacing::kLockstep) return waitForState(sim_time_ - ros::Duration(kStampSlack), obs, error);
+  if (!waitForState(t == 0 ? reset_floor_ : last_observed_ + ros::Duration(0, 1), obs, error)) return false;
+  if (t == 0) next_tick_ = ros::Time::now();
+  return true;
+}
+
+bool DriverConnection::waitForState(ros::Time min_stamp, Observation& obs, std::string& error) {
   if (min_stamp <= reset_floor_) min_stamp = reset_floor_ + ros::Duration(0, 1);
   std::unique_lock<std::mutex> lock(mutex_);
   const bool fresh = cv_.wait_for(lock, std::chrono::duration<double>(timeout_), [&] {
@@ -178,10 +280,11 @@ bool DriverConnection::observe(const ros::Time& since, Observation& obs, std::st
            (odom_sub_.getNumPublishers() == 0 || (odom_ && odom_->header.stamp >= min_stamp));
   });
   if (!fresh) {
-    error = "driver " + ns_ + ": no state stamped after " + std::to_string(since.toSec()) + " s within " +
+    error = "driver " + ns_ + ": no state stamped after " + std::to_string(min_stamp.toSec()) + " s within " +
             std::to_string(timeout_) + " s";
     return false;
   }
+  last_observed_ = joints_->header.stamp;
   obs.joint_position = joints_->position;
   obs.joint_velocity = joints_->velocity;
   obs.pressure = actuators_->pressure;
@@ -202,9 +305,9 @@ bool DriverConnection::observe(const ros::Time& since, Observation& obs, std::st
 }
 
 DriverRollouts::DriverRollouts(ros::NodeHandle& nh, const std::vector<std::string>& namespaces, ModelPtr model,
-                               double timeout)
+                               double timeout, Pacing pacing)
     : model_(std::move(model)) {
-  for (const auto& ns : namespaces) drivers_.push_back(std::make_unique<DriverConnection>(nh, ns, timeout));
+  for (const auto& ns : namespaces) drivers_.push_back(std::make_unique<DriverConnection>(nh, ns, timeout, pacing));
   for (auto& d : drivers_) {
     std::string error;
     if (!d->waitForStreams(error)) throw std::runtime_error(error);
@@ -240,7 +343,7 @@ Eigen::VectorXd DriverRollouts::initialState(const TrainingTask& task, const Sta
   Observation obs;
   if (!d.reset(initialQpos(model_.get(), task, joints_, {}), std::vector<double>(cylinders_.size(), task.initial_pressure),
                task.locked_command, error) ||
-      !d.observe(d.simTime(), obs, error))
+      !d.observe(0, obs, error))
     throw std::runtime_error(error);
   Eigen::VectorXd x(layout.nx());
   layout.state(obs, x);
@@ -255,11 +358,14 @@ RolloutResult DriverRollouts::runOne(DriverConnection& d, const TrainingTask& ta
                std::vector<double>(cylinders_.size(), task.initial_pressure), task.locked_command, failed.error))
     return failed;
   const int substeps = static_cast<int>(std::lround(task.control_dt / model_->opt.timestep));
-  return runControlLoop(
+  int t = 0;
+  RolloutResult result = runControlLoop(
       layout, controller, request.noise, cancel,
-      [&](Observation& obs, std::string& error) { return d.observe(d.simTime(), obs, error); },
+      [&](Observation& obs, std::string& error) { return d.observe(t++, obs, error); },
       [&](const std::vector<double>& volts, std::string& error) { return d.send(volts, error); },
-      [&](std::string& error) { return d.step(substeps, error); });
+      [&](std::string& error) { return d.advance(substeps, task.control_dt, error); });
+  d.hold();
+  return result;
 }
 
 std::vector<RolloutResult> DriverRollouts::run(const TrainingTask& task, const StateLayout& layout,

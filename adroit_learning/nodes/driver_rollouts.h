@@ -1,8 +1,13 @@
-// Rollout backend (a): rollouts through live simulation drivers over ROS, in lockstep. For
-// each control step the backend reads the driver's published state, evaluates the controller
-// next to the driver, publishes the valve command stamped with a fresh stamp, and asks
-// `step` for one control step's physics steps that start only once that command has arrived
-// (Step.srv's command_stamp). Resets go through `reset` (qpos in model order, pressures).
+// Rollout backend (a): rollouts through live drivers over ROS, paced one of two ways.
+//  * lockstep (simulation driver): for each control step the backend reads the driver's
+//    published state, evaluates the controller next to the driver, publishes the valve command
+//    stamped with a fresh stamp, and asks `step` for one control step's physics steps that start
+//    only once that command has arrived (Step.srv's command_stamp).
+//  * realtime (hardware, or a simulation driver running in real time): the backend paces itself
+//    on the ROS clock at the control rate, reading the newest state at each tick. Between
+//    rollouts a keep-alive thread holds every valve at the hold command, so the driver's
+//    command watchdog never trips while the trainer computes its update.
+// Resets go through `reset` (qpos in model order, pressures).
 //
 // Several drivers (backend (c): other machines under one master, each in its own namespace)
 // run the requests in parallel, one connection per driver. The driver's safe state is never
@@ -18,18 +23,23 @@
 #include <sensor_msgs/JointState.h>
 #include <std_msgs/Bool.h>
 
+#include <atomic>
 #include <condition_variable>
 #include <memory>
 #include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
 
 namespace adroit::learning_node {
 
+enum class Pacing { kLockstep, kRealtime };
+
 // One driver: its topics and services under `ns` (e.g. /adroit).
 class DriverConnection {
  public:
-  DriverConnection(ros::NodeHandle& nh, const std::string& ns, double timeout);
+  DriverConnection(ros::NodeHandle& nh, const std::string& ns, double timeout, Pacing pacing);
+  ~DriverConnection();
   const std::string& ns() const { return ns_; }
   // Waits (up to the timeout) until the driver has published joint and actuator states.
   bool waitForStreams(std::string& error);
@@ -37,16 +47,24 @@ class DriverConnection {
   bool publishesObject();
   std::vector<std::string> jointNames();
   std::vector<std::string> cylinderNames();
-  // Pause (lockstep stepping needs it), reset to qpos/pressure, then two physics steps with
-  // every valve at `hold_volts` so every sensor stream reports the reset state.
+  // Resets to qpos/pressure with every valve at `hold_volts`. Lockstep: paused, then two
+  // physics steps so every sensor stream reports the reset state. Realtime: the valves stay
+  // held (keep-alive) until the rollout's first command.
   bool reset(const std::vector<double>& qpos, const std::vector<double>& pressure, double hold_volts,
              std::string& error);
-  // The newest observation stamped at or after `since` (waits up to the timeout).
-  bool observe(const ros::Time& since, Observation& obs, std::string& error);
+  // The observation at control step t of a rollout: lockstep, the newest state stamped at the
+  // end of the last step; realtime, the newest state newer than the previous observation
+  // (waits up to the timeout). Realtime, t = 0 starts the rollout's clock.
+  bool observe(int t, Observation& obs, std::string& error);
+  // Publishes a command; the first one of a rollout ends the keep-alive hold.
   bool send(const std::vector<double>& volts, std::string& error);
-  // Steps `steps` physics steps once the last sent command has arrived.
-  bool step(int steps, std::string& error);
-  const ros::Time& simTime() const { return sim_time_; }
+  // One control step of `dt` seconds (`steps` physics steps): lockstep, the driver steps once
+  // the last sent command has arrived; realtime, sleeps until the next tick on the ROS clock.
+  bool advance(int steps, double dt, std::string& error);
+  // Ends a rollout: the keep-alive holds the valves again (realtime).
+  void hold();
+  // Realtime: ticks reached after their time by more than half a control step.
+  int lateTicks() const { return late_ticks_; }
 
  private:
   void onJoints(const sensor_msgs::JointState::ConstPtr& msg);
@@ -54,9 +72,14 @@ class DriverConnection {
   void onOdometry(const nav_msgs::Odometry::ConstPtr& msg);
   void onSafeState(const std_msgs::Bool::ConstPtr& msg);
   bool safe(std::string& error);
+  bool step(int steps, std::string& error);
+  bool waitForState(ros::Time min_stamp, Observation& obs, std::string& error);
+  void publish(const std::vector<double>& volts);
+  void keepAlive();
 
   std::string ns_;
   double timeout_;
+  Pacing pacing_;
   ros::Subscriber joints_sub_, actuators_sub_, odom_sub_, safe_sub_;
   ros::Publisher valve_pub_;
   ros::ServiceClient step_client_, reset_client_, pause_client_;
@@ -67,14 +90,21 @@ class DriverConnection {
   nav_msgs::Odometry::ConstPtr odom_;
   bool safe_state_ = false;
   ros::Time sim_time_, last_stamp_, reset_floor_;
+  ros::Time next_tick_, last_observed_;  // realtime pacing
+  int late_ticks_ = 0;
+  std::mutex command_mutex_;             // the publisher's message and stamp: rollout vs keep-alive
   adroit_msgs::ValveCommand command_;
+  std::vector<double> hold_volts_;
+  std::atomic<bool> holding_{false}, stop_{false};
+  std::thread keep_alive_;
 };
 
 class DriverRollouts : public RolloutBackend {
  public:
   // model: the task scene's MJCF (qpos layout for resets, joint ranges); namespaces: one per
   // driver. Throws std::runtime_error when a driver does not answer or runs another robot.
-  DriverRollouts(ros::NodeHandle& nh, const std::vector<std::string>& namespaces, ModelPtr model, double timeout);
+  DriverRollouts(ros::NodeHandle& nh, const std::vector<std::string>& namespaces, ModelPtr model, double timeout,
+                 Pacing pacing);
   std::string name() const override { return "driver"; }
   std::vector<std::string> jointNames() const override { return joints_; }
   std::vector<std::string> cylinderNames() const override { return cylinders_; }

@@ -8,7 +8,8 @@
 //
 // Private parameters: ~backend (driver | sim_workers), ~drivers (namespaces of the drivers
 // the driver backend uses, default [/adroit]), ~workers (sim_workers threads, 0 = cores),
-// ~tasks_dir, ~default_output_dir, ~smoothing_width (steps), ~timeout (s, a driver's answer),
+// ~pacing (lockstep: the simulation driver steps when told | realtime: hardware, or a driver
+// running in real time), ~tasks_dir, ~default_output_dir, ~timeout (s, a driver's answer),
 // ~plot (write learning_curve.png after every iteration).
 //
 // The job runs on its own thread; callbacks only read or set its shared state, so status and
@@ -71,18 +72,20 @@ class TrainerNode {
  public:
   TrainerNode(ros::NodeHandle& nh, ros::NodeHandle& pnh) : nh_(nh) {
     rosutil::Params params(pnh);
-    params.checkKeys("", {"backend", "drivers", "workers", "tasks_dir", "default_output_dir", "smoothing_width",
-                          "timeout", "plot"});
+    params.checkKeys("", {"backend", "drivers", "workers", "tasks_dir", "default_output_dir", "timeout",
+                          "plot", "pacing"});
     backend_ = params.string("backend", "driver");
     if (backend_ != "driver" && backend_ != "sim_workers") params.fail("backend", "must be driver or sim_workers");
     drivers_ = params.strings("drivers");
     if (drivers_.empty()) drivers_ = {"/adroit"};
     workers_ = params.integer("workers", 0, 0, 64);
+    const std::string pacing = params.string("pacing", "lockstep");
+    if (pacing != "lockstep" && pacing != "realtime") params.fail("pacing", "must be lockstep or realtime");
+    pacing_ = pacing == "realtime" ? learning_node::Pacing::kRealtime : learning_node::Pacing::kLockstep;
     tasks_dir_ = params.string("tasks_dir", ros::package::getPath("adroit_learning") + "/config/tasks");
     if (trainingTaskNames(tasks_dir_).empty()) params.fail("tasks_dir", "no task files (*.yaml) in '" + tasks_dir_ + "'");
     const char* home = std::getenv("ROS_HOME");
     default_output_dir_ = params.string("default_output_dir", std::string(home ? home : "/tmp") + "/adroit_learning");
-    smoothing_width_ = params.number("smoothing_width", 1.0, 0.0, 100.0);
     timeout_ = params.number("timeout", 5.0, 0.1, 600.0);
     plot_ = params.boolean("plot", true);
     plot_script_ = ros::package::getPath("adroit_learning") + "/scripts/plot_learning_curve.py";
@@ -115,7 +118,7 @@ class TrainerNode {
       config.mode = driver::ActuationMode::kPneumatic;
       return std::make_unique<SimRollouts>(config, workers_);
     }
-    return std::make_unique<DriverRollouts>(nh_, drivers_, loadModelFile(model_path).model, timeout_);
+    return std::make_unique<DriverRollouts>(nh_, drivers_, loadModelFile(model_path).model, timeout_, pacing_);
   }
 
   bool busy() const { return state_ == "running" || executing_; }
@@ -143,7 +146,7 @@ class TrainerNode {
     settings.samples = req.rollouts == 0 ? 5 : static_cast<int>(req.rollouts);
     settings.seed = req.seed != 0 ? req.seed : static_cast<std::uint64_t>(std::time(nullptr));
     settings.noise_scale = req.noise_level == 0 ? 1.0 : req.noise_level;
-    settings.smoothing_width = req.smoothing_width == 0 ? smoothing_width_ : req.smoothing_width;
+    settings.smoothing_width = req.smoothing_width;
     settings.initial_state_noise = req.initial_state_noise;
     settings.initial_state_noise_from = static_cast<int>(req.initial_state_noise_from);
     if (req.iterations == 0) {
@@ -365,7 +368,8 @@ class TrainerNode {
   std::string backend_, tasks_dir_, default_output_dir_, plot_script_;
   std::vector<std::string> drivers_;
   int workers_ = 0;
-  double smoothing_width_ = 1.0, timeout_ = 5.0;
+  double timeout_ = 5.0;
+  learning_node::Pacing pacing_ = learning_node::Pacing::kLockstep;
   bool plot_ = true;
   ros::Publisher progress_pub_;
   std::vector<ros::ServiceServer> services_;

@@ -37,6 +37,12 @@ std::string validate(const TrainerSettings& s) {
   return "";
 }
 
+std::vector<double> initialStateOffsets(NormalNoise& rng, const std::vector<double>& joint_range, double level) {
+  std::vector<double> offset(joint_range.size());
+  for (std::size_t j = 0; j < offset.size(); ++j) offset[j] = (rng.uniform() - 0.5) * level * joint_range[j];
+  return offset;
+}
+
 Trainer::Trainer(const TrainingTask& task, const TrainerSettings& settings, RolloutBackend& backend)
     : task_(task),
       settings_(settings),
@@ -66,10 +72,7 @@ std::vector<RolloutRequest> Trainer::makeRequests(int count, double state_noise)
   std::vector<RolloutRequest> requests(count);
   for (auto& r : requests) {
     r.noise = smoothedNoise(rng_, layout_.nu(), task_.horizon, settings_.smoothing_width);
-    if (state_noise > 0) {
-      r.joint_offset.resize(layout_.joints());
-      for (int j = 0; j < layout_.joints(); ++j) r.joint_offset[j] = (rng_.uniform() - 0.5) * state_noise * joint_range_[j];
-    }
+    if (state_noise > 0) r.joint_offset = initialStateOffsets(rng_, joint_range_, state_noise);
   }
   return requests;
 }

@@ -134,7 +134,7 @@ TaskOutcome TrajectoryCost::outcome(const Rollout& r) const {
   o.joint_rms = target_joint_index_.empty() ? 0.0 : std::sqrt(sq / target_joint_index_.size());
   bool ok = o.joint_rms <= task_.success_joint_rms || target_joint_index_.empty();
   if (angle_row_.size() > 0) {
-    o.angle_error = std::abs(angle_row_.dot(xT) - task_.rotation_target.at(horizon_, horizon_));
+    o.angle_error = std::abs(objectAngle(xT) - task_.rotation_target.at(horizon_, horizon_));
     o.object_height = xT[object_position_ + 2];
     o.dropped = o.object_height < task_.drop_height;
     ok = ok && o.angle_error <= task_.success_angle && !o.dropped;

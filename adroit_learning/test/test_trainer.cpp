@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <limits>
@@ -170,4 +171,27 @@ TEST(Trainer, SettingsAreChecked) {
   adroit::TrainingTask task = linearTask();
   task.target_joints["J7"] = 0.1;
   EXPECT_THROW(adroit::Trainer(task, {}, robot), adroit::TaskError);
+}
+
+TEST(Trainer, InitialStateOffsetsSpanTheLevelOfEachJointsRange) {
+  adroit::NormalNoise rng(7);
+  const std::vector<double> range = {1.0, 0.2, 3.0};
+  const double level = 0.1;
+  std::vector<double> lowest(range.size(), 0), highest(range.size(), 0);
+  for (int draw = 0; draw < 2000; ++draw) {
+    const std::vector<double> offset = adroit::initialStateOffsets(rng, range, level);
+    ASSERT_EQ(offset.size(), range.size());
+    for (std::size_t j = 0; j < range.size(); ++j) {
+      lowest[j] = std::min(lowest[j], offset[j]);
+      highest[j] = std::max(highest[j], offset[j]);
+    }
+  }
+  for (std::size_t j = 0; j < range.size(); ++j) {
+    // Uniform in +-level/2 of the range: never outside, and 2000 draws reach close to both ends.
+    EXPECT_GE(lowest[j], -0.5 * level * range[j]);
+    EXPECT_LE(highest[j], 0.5 * level * range[j]);
+    EXPECT_LT(lowest[j], -0.48 * level * range[j]);
+    EXPECT_GT(highest[j], 0.48 * level * range[j]);
+  }
+  EXPECT_TRUE(adroit::initialStateOffsets(rng, range, 0.0) == std::vector<double>(range.size(), 0.0));
 }

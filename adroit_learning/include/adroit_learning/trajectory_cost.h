@@ -93,6 +93,10 @@ class TrajectoryCost {
   // sum_t l_t(x_t, u_t) + l_T(x_T) of one rollout.
   double rolloutCost(const Rollout& rollout) const;
   TaskOutcome outcome(const Rollout& rollout) const;
+  // The object's angle about the task's rotation axis in state x (0 without an object).
+  double objectAngle(const Eigen::Ref<const Eigen::VectorXd>& x) const {
+    return angle_row_.size() > 0 ? angle_row_.dot(x) : 0.0;
+  }
   // Second-order expansion in absolute coordinates, averaged over the samples' points. Every
   // term is quadratic in (x, u), so the expansion is exact and the same at every sample; the
   // samples only fix where a non-quadratic term would be expanded.

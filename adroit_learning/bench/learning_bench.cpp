@@ -24,6 +24,7 @@
 //          update use; 0 (default) one per core, 1 no pool (serial)
 //   --out: directory of phases.csv and the plot drawn from it by plot_learning.py (installed
 //          next to this program); default learning_bench_out
+#include <adroit_core/command_line.h>
 #include <adroit_core/normal_noise.h>
 #include <adroit_core/thread_pool.h>
 #include <adroit_core/timing_stats.h>
@@ -233,24 +234,17 @@ int main(int argc, char** argv) {
   std::string scene = "arm_hand", out_dir = "learning_bench_out";
   std::uint64_t seed = 1;
   int threads = 0;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    const auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
-      return argv[++i];
-    };
-    if (a == "--iterations") iterations = std::stoi(value());
-    else if (a == "--epsilon") epsilon = std::stod(value());
-    else if (a == "--scene") scene = value();
-    else if (a == "--seed") seed = std::stoull(value());
-    else if (a == "--threads") threads = std::stoi(value());
-    else if (a == "--out") out_dir = value();
-    else {
-      std::fprintf(stderr,
-                   "usage: learning_bench [--iterations N] [--epsilon E] [--scene NAME] [--seed S] [--threads N] "
-                   "[--out DIR]\n");
-      return 2;
-    }
+  adroit::CommandLine args(argc, argv,
+                           "usage: learning_bench [--iterations N] [--epsilon E] [--scene NAME] [--seed S] "
+                           "[--threads N] [--out DIR]");
+  while (args.next()) {
+    if (args.is("--iterations")) iterations = static_cast<int>(args.integer());
+    else if (args.is("--epsilon")) epsilon = args.number();
+    else if (args.is("--scene")) scene = args.text();
+    else if (args.is("--seed")) seed = static_cast<std::uint64_t>(args.integer());
+    else if (args.is("--threads")) threads = static_cast<int>(args.integer());
+    else if (args.is("--out")) out_dir = args.text();
+    else args.unknown();
   }
   if (iterations < kHistory) iterations = kHistory;  // at least one iteration with the full history
 

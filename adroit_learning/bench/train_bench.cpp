@@ -10,6 +10,7 @@
 //
 // Usage: train_bench [--tasks a,b] [--iterations N] [--samples N] [--seed S] [--workers W]
 //                    [--out DIR]
+#include <adroit_core/command_line.h>
 #include <adroit_description/scenes.h>
 #include <adroit_learning/sim_rollouts.h>
 #include <adroit_learning/trainer.h>
@@ -111,28 +112,19 @@ int main(int argc, char** argv) {
   settings.samples = 5;
   int workers = 0;
   std::string out = "train_bench_out";
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    const auto value = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "%s needs a value\n", a.c_str());
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--tasks") tasks = split(value());
-    else if (a == "--iterations") settings.iterations = std::atoi(value().c_str());
-    else if (a == "--samples") settings.samples = std::atoi(value().c_str());
-    else if (a == "--seed") settings.seed = std::strtoull(value().c_str(), nullptr, 10);
-    else if (a == "--workers") workers = std::atoi(value().c_str());
-    else if (a == "--smoothing") settings.smoothing_width = std::atof(value().c_str());
-    else if (a == "--noise") settings.noise_scale = std::atof(value().c_str());
-    else if (a == "--out") out = value();
-    else {
-      std::fprintf(stderr, "usage: train_bench [--tasks a,b] [--iterations N] [--samples N] [--seed S] "
-                           "[--workers W] [--smoothing STEPS] [--noise SCALE] [--out DIR]\n");
-      return 2;
-    }
+  adroit::CommandLine args(argc, argv,
+                           "usage: train_bench [--tasks a,b] [--iterations N] [--samples N] [--seed S] "
+                           "[--workers W] [--smoothing STEPS] [--noise SCALE] [--out DIR]");
+  while (args.next()) {
+    if (args.is("--tasks")) tasks = split(args.text());
+    else if (args.is("--iterations")) settings.iterations = static_cast<int>(args.integer());
+    else if (args.is("--samples")) settings.samples = static_cast<int>(args.integer());
+    else if (args.is("--seed")) settings.seed = static_cast<std::uint64_t>(args.integer());
+    else if (args.is("--workers")) workers = static_cast<int>(args.integer());
+    else if (args.is("--smoothing")) settings.smoothing_width = args.number();
+    else if (args.is("--noise")) settings.noise_scale = args.number();
+    else if (args.is("--out")) out = args.text();
+    else args.unknown();
   }
   const std::string bad = adroit::validate(settings);
   if (!bad.empty()) {

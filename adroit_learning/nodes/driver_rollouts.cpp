@@ -359,12 +359,16 @@ RolloutResult DriverRollouts::runOne(DriverConnection& d, const TrainingTask& ta
     return failed;
   const int substeps = static_cast<int>(std::lround(task.control_dt / model_->opt.timestep));
   int t = 0;
+  const int late_before = d.lateTicks();
   RolloutResult result = runControlLoop(
       layout, controller, request.noise, cancel,
       [&](Observation& obs, std::string& error) { return d.observe(t++, obs, error); },
       [&](const std::vector<double>& volts, std::string& error) { return d.send(volts, error); },
       [&](std::string& error) { return d.advance(substeps, task.control_dt, error); });
   d.hold();
+  if (d.lateTicks() > late_before)  // realtime: the policy was not evaluated at the control rate throughout
+    ROS_WARN("adroit_learning: driver %s: %d of %d control steps of the rollout came more than half a step late",
+             d.ns().c_str(), d.lateTicks() - late_before, task.horizon);
   return result;
 }
 

@@ -1,5 +1,6 @@
 #include "driver_rollouts.h"
 
+#include <adroit_core/scheduling.h>
 #include <adroit_learning/sim_rollouts.h>
 #include <adroit_msgs/Reset.h>
 #include <adroit_msgs/Step.h>
@@ -23,6 +24,8 @@ constexpr int kSettleSteps = 2;
 // Realtime: how often the keep-alive re-sends the hold command between rollouts (the driver's
 // command watchdog trips after 50 ms without a command).
 constexpr double kKeepAlivePeriod = 0.01;
+// Below the simulation driver's threads (20, 19), above everything under normal scheduling.
+constexpr int kKeepAlivePriority = 10;
 
 }  // namespace
 
@@ -35,9 +38,14 @@ DriverConnection::DriverConnection(ros::NodeHandle& nh, const std::string& ns, d
   odom_sub_ = d.subscribe("object/odom", 20, &DriverConnection::onOdometry, this, hints);
   safe_sub_ = d.subscribe("safe_state", 1, &DriverConnection::onSafeState, this);
   valve_pub_ = d.advertise<adroit_msgs::ValveCommand>("valve_command", 10);
-  step_client_ = d.serviceClient<adroit_msgs::Step>("step", true);
-  reset_client_ = d.serviceClient<adroit_msgs::Reset>("reset", true);
-  pause_client_ = d.serviceClient<std_srvs::SetBool>("pause", true);
+  // Only the lockstep step service (called every control step) keeps its connection open.
+  // Destroying a persistent client can race in roscpp (ros_comm #1989: a dropped connection's
+  // mutex used after its destruction), the likely cause of the one "boost::lock_error" crash
+  // seen at the end of a realtime job; resets and pauses come once per rollout, where a new
+  // connection costs a few milliseconds.
+  step_client_ = d.serviceClient<adroit_msgs::Step>("step", pacing_ == Pacing::kLockstep);
+  reset_client_ = d.serviceClient<adroit_msgs::Reset>("reset");
+  pause_client_ = d.serviceClient<std_srvs::SetBool>("pause");
   if (pacing_ == Pacing::kRealtime) keep_alive_ = std::thread(&DriverConnection::keepAlive, this);
 }
 
@@ -57,13 +65,28 @@ DriverConnection::~DriverConnection() {
   if (keep_alive_.joinable()) keep_alive_.join();
 }
 
-// Its own thread on wall time, so a stalled callback queue or a long update never starves it.
+// Its own thread on wall time, so a stalled callback queue or a long update never starves it;
+// under SCHED_FIFO where permitted (it sleeps between periods), so neither does a busy machine.
 void DriverConnection::keepAlive() {
+  std::string why;
+  if (!enterFifo(kKeepAlivePriority, &why))
+    ROS_WARN_ONCE("adroit_learning: keep-alive thread under normal scheduling (%s): on a busy machine the driver's "
+                  "command watchdog may trip",
+                  why.c_str());
   while (!stop_.load()) {
     std::this_thread::sleep_for(std::chrono::duration<double>(kKeepAlivePeriod));
-    if (!holding_.load()) continue;
     std::lock_guard<std::mutex> lock(command_mutex_);
-    if (holding_.load() && !hold_volts_.empty()) publish(hold_volts_);
+    if (hold_volts_.empty()) continue;  // nothing to hold before the streams are up
+    if (!holding_.load()) {
+      const double age = std::chrono::duration<double>(std::chrono::steady_clock::now() - last_send_).count();
+      if (age <= repeat_for_) {
+        publish(command_.volts);  // the rollout's latest command, freshly stamped
+        continue;
+      }
+      holding_.store(true);  // the rollout stalled: hold rather than repeat a stale command
+      ++stalls_;
+    }
+    publish(hold_volts_);
   }
 }
 
@@ -214,6 +237,7 @@ bool DriverConnection::reset(const std::vector<double>& qpos, const std::vector<
 bool DriverConnection::send(const std::vector<double>& volts, std::string& error) {
   std::lock_guard<std::mutex> lock(command_mutex_);
   holding_.store(false);
+  last_send_ = std::chrono::steady_clock::now();
   publish(volts);
   (void)error;
   return true;
@@ -242,6 +266,10 @@ void DriverConnection::publish(const std::vector<double>& volts) {
 
 bool DriverConnection::advance(int steps, double dt, std::string& error) {
   if (pacing_ == Pacing::kLockstep) return step(steps, error);
+  {
+    std::lock_guard<std::mutex> lock(command_mutex_);
+    repeat_for_ = 2.0 * dt;
+  }
   next_tick_ += ros::Duration(dt);
   const ros::Duration wait = next_tick_ - ros::Time::now();
   if (wait > ros::Duration(0)) wait.sleep();
@@ -359,7 +387,7 @@ RolloutResult DriverRollouts::runOne(DriverConnection& d, const TrainingTask& ta
     return failed;
   const int substeps = static_cast<int>(std::lround(task.control_dt / model_->opt.timestep));
   int t = 0;
-  const int late_before = d.lateTicks();
+  const int late_before = d.lateTicks(), stalls_before = d.stalls();
   RolloutResult result = runControlLoop(
       layout, controller, request.noise, cancel,
       [&](Observation& obs, std::string& error) { return d.observe(t++, obs, error); },
@@ -369,6 +397,10 @@ RolloutResult DriverRollouts::runOne(DriverConnection& d, const TrainingTask& ta
   if (d.lateTicks() > late_before)  // realtime: the policy was not evaluated at the control rate throughout
     ROS_WARN("adroit_learning: driver %s: %d of %d control steps of the rollout came more than half a step late",
              d.ns().c_str(), d.lateTicks() - late_before, task.horizon);
+  if (d.stalls() > stalls_before)
+    ROS_WARN("adroit_learning: driver %s: the rollout sent no command for two control steps %d time(s); the "
+             "valves were held meanwhile",
+             d.ns().c_str(), d.stalls() - stalls_before);
   return result;
 }
 

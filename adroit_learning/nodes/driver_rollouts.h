@@ -4,9 +4,12 @@
 //    stamped with a fresh stamp, and asks `step` for one control step's physics steps that start
 //    only once that command has arrived (Step.srv's command_stamp).
 //  * realtime (hardware, or a simulation driver running in real time): the backend paces itself
-//    on the ROS clock at the control rate, reading the newest state at each tick. Between
-//    rollouts a keep-alive thread holds every valve at the hold command, so the driver's
-//    command watchdog never trips while the trainer computes its update.
+//    on the ROS clock at the control rate, reading the newest state at each tick. A keep-alive
+//    thread sends a command every 10 ms: between rollouts the hold command, so the driver's
+//    command watchdog never trips while the trainer computes its update; during a rollout the
+//    rollout's latest command again (the valves hold it anyway), so a 25 Hz controller meets a
+//    50 ms watchdog with margin. A rollout command older than two control steps is not
+//    repeated: the keep-alive falls back to the hold command and counts a stall.
 // Resets go through `reset` (qpos in model order, pressures).
 //
 // Several drivers (backend (c): other machines under one master, each in its own namespace)
@@ -65,6 +68,9 @@ class DriverConnection {
   void hold();
   // Realtime: ticks reached after their time by more than half a control step.
   int lateTicks() const { return late_ticks_; }
+  // Realtime: rollout commands the keep-alive replaced by the hold command because the rollout
+  // sent none for two control steps.
+  int stalls() const { return stalls_.load(); }
 
  private:
   void onJoints(const sensor_msgs::JointState::ConstPtr& msg);
@@ -96,6 +102,9 @@ class DriverConnection {
   adroit_msgs::ValveCommand command_;
   std::vector<double> hold_volts_;
   std::atomic<bool> holding_{false}, stop_{false};
+  std::chrono::steady_clock::time_point last_send_;  // the rollout's latest command (command_mutex_)
+  double repeat_for_ = 0.1;                          // s a rollout command is repeated (command_mutex_)
+  std::atomic<int> stalls_{0};
   std::thread keep_alive_;
 };
 

@@ -356,8 +356,10 @@ class TrainerNode {
       std::snprintf(text, sizeof(text), "ran %d steps of %s: cost %.4g, joint rms %.3f rad%s", task.horizon,
                     task.name.c_str(), outcome.cost, outcome.joint_rms, outcome.success ? ", success" : "");
       res.message = text;
+      ROS_INFO("adroit_learning: execute_policy %s: %s", req.policy_path.c_str(), text);
     } catch (const std::exception& e) {
       res.message = e.what();
+      ROS_WARN("adroit_learning: execute_policy %s refused: %s", req.policy_path.c_str(), e.what());
     }
     std::lock_guard<std::mutex> lock(mutex_);
     executing_ = false;

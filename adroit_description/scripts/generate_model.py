@@ -332,6 +332,10 @@ def forearm(with_roll_joint):
                 rgba="0.35 0.38 0.42 1")
 
 
+# Teleop scenes: the hand base's free joint and the mocap body it is welded to.
+HAND_BASE_JOINT = "hand_base"
+HAND_BASE_TARGET = "hand_base_target"
+
 # Forearm orientations in the world (euler xyz): the forearm's +z points along world +y.
 PALM_DOWN = (-1.5708, 0, 3.14159)
 PALM_UP = (-1.5708, 0, 0)
@@ -495,6 +499,9 @@ class Scene:
     extra_custom: str = ""
     plan_objects: str = ""        # the planning model's objects, when they differ
     forearm_euler: Tuple[float, float, float] = PALM_DOWN  # arm scenes: the hand's mount on the elbow roll
+    # Teleop (thesis 9.2.3): the hand's base is free and follows a mocap body through a soft
+    # weld, so a motion-capture stream moves it while contacts and joint limits keep priority.
+    free_base: bool = False
 
 
 FREE_OBJECT_JOINT = '<freejoint name="object_root"/>'
@@ -587,6 +594,21 @@ def scenes():
         Scene("keypad", "typing on a numeric keypad with spring-loaded keys (thesis 6.5)", False,
               (0, -0.55, 0.12), PALM_DOWN, objects=pad,
               extra_custom='<numeric name="keypad_press_depth" data="0.0055"/>', plan_objects=plan_pad),
+        # Glove teleop (thesis ch. 9, 10.3): the hand hangs palm down over the object, its base
+        # welded to the mocap body hand_base_target; the operator reaches, grasps and lifts.
+        Scene("teleop_tube", "glove teleop: free hand base on a mocap weld, the tube lying on the table",
+              False, (0, -0.55, 0.15), PALM_DOWN, free_base=True,
+              objects=object_body((0, -0.16, 0.022),
+                                  '<geom name="C_object" type="capsule" size="0.022 0.12" '
+                                  'quat="0.70711 0 0.70711 0" mass="0.30" rgba="0.45 0.3 0.15 1" '
+                                  'contype="3" conaffinity="3" condim="3"/>'),
+              object_qpos=[0, -0.16, 0.022, 1, 0, 0, 0]),
+        Scene("teleop_ball", "glove teleop: free hand base on a mocap weld, a ball resting on the table",
+              False, (0, -0.55, 0.15), PALM_DOWN, free_base=True,
+              objects=object_body((0.0, -0.17, 0.035),
+                                  '<geom name="C_object" type="sphere" size="0.035" mass="0.18" '
+                                  'rgba="0.85 0.3 0.2 1" contype="1" conaffinity="1" condim="3"/>'),
+              object_qpos=[0.0, -0.17, 0.035, 1, 0, 0, 0]),
     ]
 
 # ----------------------------------------------------------------------------- MJCF writer
@@ -629,6 +651,8 @@ class Mjcf:
         hand_collision = 'contype="1" conaffinity="0"'
         out = [f'{ind}<body name="{b.name}" pos="{fmt(b.pos)}" quat="{fmt(b.quat)}">']
         out.append(f'{ind}  <inertial pos="{fmt(b.com)}" mass="{fmt(b.mass)}" diaginertia="{fmt(b.inertia)}"/>')
+        if b is self.root and self.scene.free_base:
+            out.append(f'{ind}  <freejoint name="{HAND_BASE_JOINT}"/>')
         if b.joint:
             out.append(f"{ind}  {self.joint_xml(b.joint)}")
         for g in b.geoms:
@@ -656,8 +680,11 @@ class Mjcf:
         return out
 
     def keyframe_qpos(self, robot_q):
-        """qpos of a keyframe: the robot's joints, then the object's free joint, then keys."""
-        q = list(robot_q) + list(self.scene.object_qpos)
+        """qpos of a keyframe: the hand base's free joint (teleop scenes), the robot's joints,
+        then the object's free joint, then keys."""
+        base = (list(self.scene.mount_pos) + list(euler_xyz_to_quat(*self.scene.mount_euler))
+                if self.scene.free_base else [])
+        q = base + list(robot_q) + list(self.scene.object_qpos)
         if self.scene.name == "keypad":
             q += [0.0] * 12
         return q
@@ -690,7 +717,18 @@ class Mjcf:
         objects = s.plan_objects if self.planning and s.plan_objects else s.objects
         if objects:
             lines.append("    " + objects)
+        if s.free_base:
+            lines.append(f'    <body name="{HAND_BASE_TARGET}" mocap="true" pos="{fmt(s.mount_pos)}" '
+                         f'quat="{fmt(euler_xyz_to_quat(*s.mount_euler))}">'
+                         '<site name="S_hand_base_target" size="0.01" rgba="0 0.8 0.2 0.5" group="2"/></body>')
         lines.append("  </worldbody>")
+        if s.free_base:
+            # A soft weld (time constant 20 ms, twice the contacts' 10 ms): the base follows the
+            # mocap body closely, but contacts win when the operator pushes the hand into the table.
+            lines.append("  <equality>")
+            lines.append(f'    <weld name="hand_base_weld" body1="{HAND_BASE_TARGET}" body2="{self.root.name}" '
+                         'solref="0.02 1"/>')
+            lines.append("  </equality>")
 
         lines.append("  <contact>")
         for a, b in SELF_PAIRS:
@@ -811,6 +849,10 @@ def write_urdf(model: Mjcf):
                          f'<child link="{b.name}"/>{urdf_origin(b.pos, b.quat)}<axis xyz="{fmt(j.axis)}"/>'
                          f'<limit lower="{fmt(j.range[0])}" upper="{fmt(j.range[1])}" effort="{fmt(effort, 3)}" '
                          f'velocity="20"/><dynamics damping="{fmt(j.damping)}" friction="{fmt(j.frictionloss)}"/></joint>')
+        elif parent is None and s.free_base:
+            # robot_state_publisher skips floating joints: the driver broadcasts world -> base.
+            lines.append(f'  <joint name="{HAND_BASE_JOINT}" type="floating"><parent link="world"/>'
+                         f'<child link="{b.name}"/></joint>')
         else:
             lines.append(f'  <joint name="{b.name}_fixed" type="fixed"><parent link="{parent_name}"/>'
                          f'<child link="{b.name}"/>{urdf_origin(b.pos, b.quat)}</joint>')

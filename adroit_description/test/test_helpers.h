@@ -15,12 +15,14 @@ struct SceneFacts {
   std::string name;
   bool arm;        // 28-DOF arm-hand (48 cylinders) or hand-only (24 DOF, 40 cylinders)
   int object_qpos; // free object: 7, keypad: 12 keys, none: 0
+  bool free_base = false;  // teleop: the hand base on a free joint welded to a mocap body
 };
 
 // From the issue: hand-only scenes have 40 cylinders, arm-hand 48; objects add a free joint.
 inline std::vector<SceneFacts> expectedScenes() {
   return {{"hand", false, 0}, {"arm_hand", true, 0}, {"tube", false, 7},
-          {"bottle", false, 7}, {"ball", true, 7},     {"keypad", false, 12}};
+          {"bottle", false, 7}, {"ball", true, 7},     {"keypad", false, 12},
+          {"teleop_tube", false, 7, true}, {"teleop_ball", false, 7, true}};
 }
 
 inline adroit::LoadedModel loadScene(const std::string& scene, bool planning = false) {

@@ -76,11 +76,22 @@ TEST(Urdf, KdlForwardKinematicsMatchesMujoco) {
         q(qnr) = v;
       }
       mj_kinematics(m, d.get());
+      // Teleop scenes: the URDF's floating base joint is KDL's identity; the base's pose in
+      // the world is the free joint's (the driver broadcasts it).
+      KDL::Frame base_pose = KDL::Frame::Identity();
+      if (facts.free_base) {
+        const int root = mj_name2id(m, mjOBJ_BODY, "forearm");
+        ASSERT_GE(root, 0);
+        const double* r = d->xmat + 9 * root;
+        base_pose = KDL::Frame(KDL::Rotation(r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8]),
+                               KDL::Vector(d->xpos[3 * root], d->xpos[3 * root + 1], d->xpos[3 * root + 2]));
+      }
       for (const auto& [seg_name, element] : tree.getSegments()) {
         const int b = mj_name2id(m, mjOBJ_BODY, seg_name.c_str());
         ASSERT_GE(b, 0) << "URDF link without a MuJoCo body: " << seg_name;
         KDL::Frame f;
         ASSERT_GE(fk.JntToCart(q, f, seg_name), 0) << seg_name;
+        if (seg_name != "world") f = base_pose * f;
         for (int k = 0; k < 3; ++k) worst_pos = std::max(worst_pos, std::abs(f.p(k) - d->xpos[3 * b + k]));
         // Rotation error: angle of R_kdl^T R_mujoco.
         KDL::Rotation r_mj(d->xmat[9 * b + 0], d->xmat[9 * b + 1], d->xmat[9 * b + 2], d->xmat[9 * b + 3],

@@ -4,6 +4,7 @@
 
 #include <sys/stat.h>
 
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -32,8 +33,10 @@ TEST(Scenes, EveryVariantLoadsCleanWithExpectedCounts) {
       const int dof = facts.arm ? 28 : 24;
       const int cylinders = facts.arm ? 48 : 40;
       const int object_nv = facts.object_qpos == 7 ? 6 : facts.object_qpos;
-      EXPECT_EQ(m->nq, dof + facts.object_qpos);
-      EXPECT_EQ(m->nv, dof + object_nv);
+      EXPECT_EQ(m->nq, dof + facts.object_qpos + (facts.free_base ? 7 : 0));
+      EXPECT_EQ(m->nv, dof + object_nv + (facts.free_base ? 6 : 0));
+      EXPECT_EQ(m->nmocap, facts.free_base ? 1 : 0);
+      EXPECT_EQ(m->neq, facts.free_base ? 1 : 0);
       EXPECT_EQ(m->nu, cylinders);
       EXPECT_EQ(m->ntendon, cylinders + 4);  // + the four DIP-PIP couplers
       EXPECT_DOUBLE_EQ(m->opt.timestep, 0.002);
@@ -165,6 +168,44 @@ TEST(Scenes, KeypadKeysAreSpringLoaded) {
     mj_step(m, d.get());
   }
   EXPECT_GT(d->qpos[m->jnt_qposadr[key]], -0.0005);
+}
+
+// Thesis 9.2.3: the mocap body moves the hand's base through a soft weld; contacts keep
+// priority over it.
+TEST(Scenes, TeleopBaseFollowsItsMocapBody) {
+  auto loaded = loadScene("teleop_ball");
+  const mjModel* m = loaded.model.get();
+  adroit::DataPtr d = adroit::makeData(m);
+  mj_resetDataKeyframe(m, d.get(), mj_name2id(m, mjOBJ_KEY, "home"));
+  const int base = mj_name2id(m, mjOBJ_BODY, "forearm");
+  const int target = mj_name2id(m, mjOBJ_BODY, "hand_base_target");
+  ASSERT_GE(base, 0);
+  ASSERT_GE(target, 0);
+  const int mocap = m->body_mocapid[target];
+  ASSERT_GE(mocap, 0);
+  const double start[3] = {d->mocap_pos[3 * mocap], d->mocap_pos[3 * mocap + 1], d->mocap_pos[3 * mocap + 2]};
+  auto distance = [&](const double* a, const double* b) {
+    return std::sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) + (a[2] - b[2]) * (a[2] - b[2]));
+  };
+  for (int i = 0; i < 500; ++i) mj_step(m, d.get());  // 1 s held: the 5 kg hand sags a little
+  EXPECT_LT(distance(d->xpos + 3 * base, start), 0.01);
+  // The operator moves 10 cm up and 5 cm sideways over 0.2 s: the base arrives within 1 cm.
+  const double goal[3] = {start[0] + 0.05, start[1], start[2] + 0.10};
+  for (int i = 1; i <= 100; ++i) {
+    for (int k = 0; k < 3; ++k) d->mocap_pos[3 * mocap + k] = start[k] + (goal[k] - start[k]) * i / 100.0;
+    mj_step(m, d.get());
+  }
+  for (int i = 0; i < 150; ++i) mj_step(m, d.get());
+  EXPECT_LT(distance(d->xpos + 3 * base, goal), 0.01);
+  // Pushed 10 cm into the table, the hand stops on it: contacts win over the weld.
+  const double into_table[3] = {start[0], start[1], -0.10};
+  for (int k = 0; k < 3; ++k) d->mocap_pos[3 * mocap + k] = into_table[k];
+  for (int i = 0; i < 500; ++i) mj_step(m, d.get());
+  double lowest = 1e9;
+  for (int b = 1; b < m->nbody; ++b)
+    if (m->body_rootid[b] == base) lowest = std::min(lowest, d->xpos[3 * b + 2]);
+  EXPECT_GT(lowest, -0.01) << "a hand body went through the table top (z = 0)";
+  EXPECT_EQ(adroit::warningCount(d.get()), 0) << adroit::warningSummary(d.get());
 }
 
 TEST(BadInput, UnknownSceneNamesTheKnownOnes) {

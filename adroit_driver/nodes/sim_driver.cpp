@@ -42,6 +42,8 @@ SimDriver::SimDriver(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh), io_(nh,
   touch_msg_.name = robot_->touchNames();
   odom_msg_.header.frame_id = "world";
   odom_msg_.child_frame_id = "object";
+  base_tf_.header.frame_id = "world";
+  base_tf_.child_frame_id = robot_->baseFrame();
 
   joint_pub_ = io_.advertise<sensor_msgs::JointState>("joint_states", 10);
   actuator_pub_ = io_.advertise<adroit_msgs::ActuatorStates>("actuator_states", 10);
@@ -50,6 +52,10 @@ SimDriver::SimDriver(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh), io_(nh,
   diag_pub_ = io_.advertise<diagnostic_msgs::DiagnosticArray>("diagnostics", 5);
   safe_pub_ = io_.advertise<std_msgs::Bool>("safe_state", 1, true);
   marker_pub_ = io_.advertise<visualization_msgs::MarkerArray>("markers", 2);
+  latency_pub_ = io_.advertise<adroit_msgs::CommandLatency>("command_latency", 50);
+  if (robot_->hasFreeBase())  // teleop scenes: a motion-capture stream moves the hand's base
+    base_sub_ = io_.subscribe("hand_base/target", 10, &SimDriver::onBaseTarget, this,
+                              ros::TransportHints().tcpNoDelay());
   if (params_.use_sim_time) clock_pub_ = nh_.advertise<rosgraph_msgs::Clock>("/clock", 10);
   tf_ = std::make_unique<tf2_ros::TransformBroadcaster>();
 

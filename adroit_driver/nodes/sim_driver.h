@@ -30,6 +30,8 @@
 #include <vector>
 
 #include <adroit_msgs/ActuatorStates.h>
+#include <adroit_msgs/CommandLatency.h>
+#include <geometry_msgs/PoseStamped.h>
 #include <adroit_msgs/Reset.h>
 #include <adroit_msgs/SetObjectPose.h>
 #include <adroit_msgs/Step.h>
@@ -119,6 +121,11 @@ class SimDriver {
     bool all = false;  // an explicit republish (after reset / set pose), not a step
     bool clock = false, joints = false, actuators = false, touch = false, object = false;
     bool markers = false;  // build markers from the snapshot (sim_markers.cpp)
+    bool base = false;     // teleop scenes: tf world -> hand base
+    // A command with a new stamp acted on for the first time in this step: its stamp and when
+    // the step was done (published on command_latency).
+    bool latency = false;
+    ros::Time command_stamp, command_applied;
     double sim_clock = 0;
     ros::Time stamp;
     Signals signals;
@@ -156,6 +163,7 @@ class SimDriver {
   void onValveCommand(const adroit_msgs::ValveCommand::ConstPtr& msg);
   void onForceCommand(const adroit_msgs::TendonForceCommand::ConstPtr& msg);
   void onEstopInput(const std_msgs::Bool::ConstPtr& msg);
+  void onBaseTarget(const geometry_msgs::PoseStamped::ConstPtr& msg);  // teleop scenes, default queue
   bool onPause(std_srvs::SetBool::Request& req, std_srvs::SetBool::Response& res);
   bool onEstop(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool onRelease(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
@@ -184,7 +192,9 @@ class SimDriver {
   ros::NodeHandle safety_io_;  // /adroit on safety_queue_
   std::unique_ptr<ros::AsyncSpinner> safety_spinner_;
   ros::Publisher joint_pub_, actuator_pub_, touch_pub_, odom_pub_, diag_pub_, safe_pub_, marker_pub_, clock_pub_;
-  ros::Subscriber valve_sub_, force_sub_, estop_input_sub_;
+  ros::Subscriber valve_sub_, force_sub_, estop_input_sub_, base_sub_;
+  ros::Publisher latency_pub_;
+  std::atomic<std::uint64_t> base_targets_{0}, base_targets_rejected_{0};
   std::vector<ros::ServiceServer> services_;
   ros::WallTimer diag_timer_, monitor_timer_;
   std::unique_ptr<tf2_ros::TransformBroadcaster> tf_;
@@ -202,7 +212,12 @@ class SimDriver {
   adroit_msgs::ActuatorStates actuator_msg_;
   adroit_msgs::Touch touch_msg_;
   nav_msgs::Odometry odom_msg_;
-  geometry_msgs::TransformStamped object_tf_;
+  geometry_msgs::TransformStamped object_tf_, base_tf_;
+  adroit_msgs::CommandLatency latency_msg_;
+  // Simulation thread: the newest command stamp already acted on, and one not yet published.
+  ros::Time applied_command_stamp_;
+  bool latency_due_ = false;
+  ros::Time latency_stamp_, latency_applied_;
   // Safety monitor's state (safety queue only).
   bool last_safe_published_ = false, safe_published_once_ = false;
   Counters logged_;            // event counters already logged

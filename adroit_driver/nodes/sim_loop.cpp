@@ -112,6 +112,7 @@ void SimDriver::loop() {
   while (running_) {
     runPendingRequest();
     bool requested = false, last_requested = false;
+    ros::Time newest_command;
     {
       std::unique_lock<std::mutex> lock(control_mutex_);
       const auto change_waiting = [this] { return pending_change_ && !change_done_; };
@@ -128,6 +129,7 @@ void SimDriver::loop() {
       }
       requested = paused_ && pending_steps_ > 0;
       last_requested = requested && pending_steps_ == 1;
+      newest_command = last_command_stamp_;
     }
     const auto compute_start = SteadyClock::now();
     double clock_after;
@@ -144,6 +146,15 @@ void SimDriver::loop() {
       steps_done_.store(robot_->counters().steps, std::memory_order_relaxed);
     }
     const auto compute_end = SteadyClock::now();
+    if (newest_command > applied_command_stamp_) {
+      // The first step acting on a command with a new stamp (read before the step: a command
+      // noted during it counts for the next one, so the latency is never under-reported).
+      applied_command_stamp_ = latency_stamp_ = newest_command;
+      // Its state's time: sim time, or the real-time schedule's (the wall time if later).
+      latency_applied_ = params_.use_sim_time ? ros::Time(clock_after)
+                                               : ros::Time(std::max(wall_offset_ + clock_after, ros::WallTime::now().toSec()));
+      latency_due_ = true;
+    }
     double lateness = -1;  // publication after the deadline (s), real time on schedule
     if (params_.realtime && !requested) {
       auto deadline = origin + std::chrono::duration_cast<SteadyClock::duration>(

@@ -36,6 +36,8 @@ DriverParams readParams(const ros::NodeHandle& pnh) {
   c.max_reset_distance = p.number("max_reset_distance", c.max_reset_distance);
   c.max_reset_velocity = p.number("max_reset_velocity", c.max_reset_velocity);
   c.reset_range_margin = p.number("reset_range_margin", c.reset_range_margin);
+  c.max_base_speed = p.number("max_base_speed", c.max_base_speed);
+  c.max_base_angular_speed = p.number("max_base_angular_speed", c.max_base_angular_speed);
   SensorRealism& s = c.sensors;
   s.enabled = p.boolean("sensor_realism", s.enabled);
   s.seed = static_cast<std::uint64_t>(p.integer("seed", static_cast<int>(s.seed), 0, 2147483647));

@@ -36,9 +36,16 @@ void SimDriver::publishDue(bool all, double wall_now, bool flush) {
     batch.actuators = finite && (all || k % actuator_every_ == 0);
     batch.touch = finite && (all || k % touch_every_ == 0);
     batch.object = finite && robot_->hasObject() && (all || k % object_every_ == 0);
+    batch.base = finite && robot_->hasFreeBase() && (all || k % object_every_ == 0);
+    batch.latency = latency_due_ && !all;
+    if (batch.latency) {
+      batch.command_stamp = latency_stamp_;
+      batch.command_applied = latency_applied_;
+      latency_due_ = false;
+    }
     batch.sim_clock = robot_->clock();
     batch.stamp = stamp();
-    if (batch.joints || batch.actuators || batch.touch || batch.object) batch.signals = robot_->sensed();
+    if (batch.joints || batch.actuators || batch.touch || batch.object || batch.base) batch.signals = robot_->sensed();
     if (batch.actuators) batch.command = robot_->appliedCommand();
     batch.markers = false;
     if (params_.marker_rate > 0 && markers_wanted_.load(std::memory_order_relaxed) &&
@@ -158,6 +165,8 @@ void SimDriver::publishBatch(const Batch& batch) {
     odom_pub_.publish(odom_msg_);
     tf_->sendTransform(object_tf_);
   }
+  if (batch.base) tf_->sendTransform(base_tf_);
+  if (batch.latency) latency_pub_.publish(latency_msg_);
   if (batch.markers) publishMarkers();
 }
 
@@ -202,6 +211,18 @@ void SimDriver::fillMessages(const Batch& batch) {
     object_tf_.transform.translation.y = pose.position.y;
     object_tf_.transform.translation.z = pose.position.z;
     object_tf_.transform.rotation = pose.orientation;
+  }
+  if (batch.base) {
+    const auto& b = s.base;
+    base_tf_.header.stamp = batch.stamp;
+    auto& t = base_tf_.transform;
+    t.translation.x = b[0], t.translation.y = b[1], t.translation.z = b[2];
+    t.rotation.w = b[3], t.rotation.x = b[4], t.rotation.y = b[5], t.rotation.z = b[6];
+  }
+  if (batch.latency) {
+    latency_msg_.header.stamp = batch.command_stamp;
+    latency_msg_.applied = batch.command_applied;
+    latency_msg_.latency = (batch.command_applied - batch.command_stamp).toSec();
   }
 }
 

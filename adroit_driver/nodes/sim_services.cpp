@@ -52,6 +52,25 @@ void SimDriver::onForceCommand(const adroit_msgs::TendonForceCommand::ConstPtr& 
   if (validCommand(result)) noteCommandStamp(msg->header.stamp);
 }
 
+void SimDriver::onBaseTarget(const geometry_msgs::PoseStamped::ConstPtr& msg) {
+  std::string error;
+  bool ok = msg->header.frame_id.empty() || msg->header.frame_id == "world";
+  if (!ok) {
+    error = "frame '" + msg->header.frame_id + "' is not 'world' (transform the mocap stream first)";
+  } else {
+    const auto& p = msg->pose.position;
+    const auto& q = msg->pose.orientation;
+    std::lock_guard<PiMutex> lock(robot_mutex_);
+    ok = robot_->setBaseTarget({p.x, p.y, p.z}, {q.w, q.x, q.y, q.z}, &error);
+  }
+  if (ok) {
+    ++base_targets_;
+    return;
+  }
+  ++base_targets_rejected_;
+  ROS_ERROR_THROTTLE(1.0, "adroit_sim: hand_base/target rejected: %s", error.c_str());
+}
+
 void SimDriver::noteCommandStamp(const ros::Time& stamp) {
   std::lock_guard<std::mutex> lock(control_mutex_);
   if (stamp <= last_command_stamp_) return;

@@ -19,7 +19,7 @@ bool allFinite(const Signals& s) {
   };
   return finite(s.joint_position) && finite(s.joint_velocity) && finite(s.joint_effort) && finite(s.pressure) &&
          finite(s.length) && finite(s.length_rate) && finite(s.tension) && std::isfinite(s.supply_pressure) &&
-         finite(s.touch) && finite(s.object);
+         finite(s.touch) && finite(s.object) && finite(s.base);
 }
 
 void DelayLine::reserve(std::size_t frames, std::size_t frame_size) {
@@ -90,6 +90,7 @@ void SensorPipeline::restart(double now, const Signals& truth) {
   sampleCylinders(now, 0.0, truth, true);
   sampleTouchAndObject(now, truth);
   readDelayed(now);
+  sensed_.base = truth.base;  // the simulated base pose, for tf (not a sensor of the robot)
 }
 
 void SensorPipeline::shiftTime(double delta) {
@@ -102,6 +103,7 @@ void SensorPipeline::update(double now, double dt, const Signals& truth) {
   sampleCylinders(now, dt, truth, false);
   sampleTouchAndObject(now, truth);
   readDelayed(now);
+  sensed_.base = truth.base;  // the simulated base pose, for tf (not a sensor of the robot)
 }
 
 void SensorPipeline::sampleJoints(double now, const Signals& truth) {

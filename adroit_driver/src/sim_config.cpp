@@ -39,6 +39,9 @@ std::string validate(const SimConfig& c) {
     return describe("~max_reset_velocity", "> 0 and finite (rad/s or m/s)", c.max_reset_velocity);
   if (!(c.reset_range_margin >= 0 && c.reset_range_margin <= 1))
     return describe("~reset_range_margin", "in [0, 1] (fraction of a joint's range)", c.reset_range_margin);
+  if (!positiveFinite(c.max_base_speed)) return describe("~max_base_speed", "> 0 and finite (m/s)", c.max_base_speed);
+  if (!positiveFinite(c.max_base_angular_speed))
+    return describe("~max_base_angular_speed", "> 0 and finite (rad/s)", c.max_base_angular_speed);
   const SensorRealism& s = c.sensors;
   if (!positiveFinite(s.joint_rate) || s.joint_rate > 10000)
     return describe("~sensors/joint_rate", "in (0, 10000] Hz", s.joint_rate);

@@ -102,6 +102,21 @@ SimulatedRobot::SimulatedRobot(const SimConfig& config) : config_(config) {
     object_dof_ = m->jnt_dofadr[m->body_jntadr[object]];
   }
 
+  // Teleop scenes: a free joint named hand_base on the robot's root and the mocap body it is
+  // welded to (generate_model.py); both or neither.
+  const int base_joint = mj_name2id(m, mjOBJ_JOINT, "hand_base");
+  const int base_target = mj_name2id(m, mjOBJ_BODY, "hand_base_target");
+  if ((base_joint >= 0) != (base_target >= 0 && m->body_mocapid[base_target] >= 0))
+    throw std::invalid_argument("model '" + config_.model_path +
+                                "': a free joint 'hand_base' needs a mocap body 'hand_base_target' and vice versa");
+  if (base_joint >= 0) {
+    if (m->jnt_type[base_joint] != mjJNT_FREE)
+      throw std::invalid_argument("model '" + config_.model_path + "': joint 'hand_base' must be a free joint");
+    base_qpos_ = m->jnt_qposadr[base_joint];
+    base_mocap_ = m->body_mocapid[base_target];
+    base_frame_ = mj_id2name(m, mjOBJ_BODY, m->jnt_bodyid[base_joint]);
+  }
+
   checked_.actuator.reserve(n);
   checked_.value.reserve(n);
   seen_.reserve(n);
@@ -424,6 +439,7 @@ void SimulatedRobot::step() {
     if (stalest >= 0 && clock_ - last_command_clock_[stalest] >= config_.watchdog_timeout - 1e-9)
       enterSafeState(SafeCause::kWatchdog, stalest);
   }
+  if (base_target_set_) moveBaseTarget();
   FaultSite fault;
   const bool ok = physicsStep(&fault);
   safety_.fault_persists = !ok;
@@ -464,6 +480,7 @@ void SimulatedRobot::computeTruth() {
                                   : (safety_.safe_state ? description::kAtmosphericPressure : config_.supply_pressure);
   truth_.touch.resize(touch_adr_.size());
   for (std::size_t k = 0; k < touch_adr_.size(); ++k) truth_.touch[k] = d->sensordata[touch_adr_[k]];
+  if (base_qpos_ >= 0) std::copy(d->qpos + base_qpos_, d->qpos + base_qpos_ + 7, truth_.base.begin());
   if (object_body_ >= 0) {
     std::copy(d->qpos + object_qpos_, d->qpos + object_qpos_ + 7, truth_.object.begin());
     std::copy(d->qvel + object_dof_, d->qvel + object_dof_ + 6, truth_.object.begin() + 7);
@@ -574,6 +591,7 @@ bool SimulatedRobot::resetToKeyframe(const std::string& keyframe, std::string* e
     const std::vector<double> volts = safety_.safe_state ? std::vector<double>(cylinders_.size(), kExhaustVolts) : command_;
     plant_->setState(settledPlant(*plant_, atmosphere, volts, safety_.safe_state));
   }
+  holdBaseWhereItIs();
   afterTeleport();
   return true;
 }
@@ -658,8 +676,77 @@ bool SimulatedRobot::resetToState(const std::vector<double>& qpos, const std::ve
     const std::vector<double> volts = safety_.safe_state ? std::vector<double>(cylinders_.size(), kExhaustVolts) : command_;
     plant_->setState(settledPlant(*plant_, pressure, volts, safety_.safe_state));
   }
+  holdBaseWhereItIs();
   afterTeleport();
   return true;
+}
+
+bool SimulatedRobot::setBaseTarget(const std::array<double, 3>& position, const std::array<double, 4>& quaternion,
+                                   std::string* error) {
+  auto fail = [&](const std::string& what) {
+    if (error) *error = what;
+    return false;
+  };
+  if (base_mocap_ < 0) return fail("the scene has no free hand base (teleop scenes: teleop_tube, teleop_ball)");
+  for (double v : position) if (!std::isfinite(v)) return fail("position contains NaN or Inf");
+  double norm = 0;
+  for (double v : quaternion) {
+    if (!std::isfinite(v)) return fail("orientation contains NaN or Inf");
+    norm += v * v;
+  }
+  norm = std::sqrt(norm);
+  if (norm < 1e-6) return fail("orientation is not a quaternion (norm ~ 0)");
+  const double distance = std::hypot(position[0], position[1], position[2]);
+  if (distance > config_.max_reset_distance)
+    return fail("position is " + format(distance) + " m from the origin, beyond max_reset_distance " +
+                format(config_.max_reset_distance) + " m");
+  for (int k = 0; k < 3; ++k) base_target_[k] = position[k];
+  for (int k = 0; k < 4; ++k) base_target_[3 + k] = quaternion[k] / norm;
+  base_target_set_ = true;
+  return true;
+}
+
+void SimulatedRobot::holdBaseWhereItIs() {
+  if (base_mocap_ < 0) return;
+  // The weld's reference is the identity: the mocap body at the base's pose holds it there
+  // until a new target comes.
+  mjData* d = data_.get();
+  mju_copy3(d->mocap_pos + 3 * base_mocap_, d->qpos + base_qpos_);
+  mju_copy4(d->mocap_quat + 4 * base_mocap_, d->qpos + base_qpos_ + 3);
+  base_target_set_ = false;
+}
+
+void SimulatedRobot::moveBaseTarget() {
+  mjData* d = data_.get();
+  double* pos = d->mocap_pos + 3 * base_mocap_;
+  double* quat = d->mocap_quat + 4 * base_mocap_;
+  // Translation: straight towards the target, at most max_base_speed * dt per step.
+  double delta[3], length = 0;
+  for (int k = 0; k < 3; ++k) {
+    delta[k] = base_target_[k] - pos[k];
+    length += delta[k] * delta[k];
+  }
+  length = std::sqrt(length);
+  const double max_step = config_.max_base_speed * config_.timestep;
+  const double scale = length > max_step ? max_step / length : 1.0;
+  for (int k = 0; k < 3; ++k) pos[k] += scale * delta[k];
+  // Rotation: about the axis of the remaining rotation, at most max_base_angular_speed * dt.
+  double inverse[4], difference[4], velocity[3];
+  mju_negQuat(inverse, quat);
+  mju_mulQuat(difference, base_target_.data() + 3, inverse);  // target = difference * current
+  mju_quat2Vel(velocity, difference, 1.0);                      // axis * angle (world frame)
+  const double angle = mju_norm3(velocity);
+  const double max_angle = config_.max_base_angular_speed * config_.timestep;
+  if (angle > max_angle) mju_scl3(velocity, velocity, max_angle / angle);
+  if (angle > 1e-12) {
+    double turn[4];
+    mju_normalize3(velocity);
+    mju_axisAngle2Quat(turn, velocity, std::min(angle, max_angle));
+    double moved[4];
+    mju_mulQuat(moved, turn, quat);
+    mju_normalize4(moved);
+    mju_copy4(quat, moved);
+  }
 }
 
 bool SimulatedRobot::setObjectPose(const std::array<double, 3>& position, const std::array<double, 4>& quaternion,

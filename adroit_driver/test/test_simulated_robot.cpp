@@ -733,5 +733,44 @@ TEST(SimulatedRobot, SensedValuesAreFiniteInNormalRunning) {
   }
 }
 
+// Teleop scenes (thesis 9.2.3): a motion-capture stream moves the hand's base through its
+// mocap body, no faster than max_base_speed; bad targets are refused and change nothing.
+TEST(SimulatedRobot, HandBaseFollowsItsTargetAtTheSpeedLimit) {
+  SimConfig c = config("teleop_ball", ActuationMode::kForce, false);
+  c.max_base_speed = 0.5;
+  SimulatedRobot robot(c);
+  ASSERT_TRUE(robot.hasFreeBase());
+  EXPECT_STREQ(robot.baseFrame(), "forearm");
+  std::string error;
+  SimulatedRobot fixed(config("hand", ActuationMode::kForce, false));
+  EXPECT_FALSE(fixed.hasFreeBase());
+  EXPECT_FALSE(fixed.setBaseTarget({0, -0.5, 0.2}, {1, 0, 0, 0}, &error));
+  EXPECT_NE(error.find("teleop"), std::string::npos) << error;
+
+  const std::array<double, 7> start = robot.truth().base;
+  const std::array<double, 4> q{start[3], start[4], start[5], start[6]};
+  EXPECT_FALSE(robot.setBaseTarget({NAN, 0, 0}, q, &error));
+  EXPECT_FALSE(robot.setBaseTarget({0, 0, 0.2}, {0, 0, 0, 0}, &error));
+  EXPECT_FALSE(robot.setBaseTarget({0, 0, 11}, q, &error));
+  EXPECT_NE(error.find("max_reset_distance"), std::string::npos) << error;
+  for (int k = 0; k < 100; ++k) robot.step();  // 0.2 s: no target, the base stays (sags < 1 cm)
+  EXPECT_NEAR(robot.truth().base[2], start[2], 0.01);
+
+  // 10 cm up: at 0.5 m/s the mocap body needs 0.2 s; after 0.1 s the base is about half-way.
+  ASSERT_TRUE(robot.setBaseTarget({start[0], start[1], start[2] + 0.10}, q, &error)) << error;
+  for (int k = 0; k < 50; ++k) robot.step();
+  EXPECT_LT(robot.truth().base[2], start[2] + 0.06);
+  EXPECT_GT(robot.truth().base[2], start[2] + 0.02);
+  for (int k = 0; k < 200; ++k) robot.step();
+  EXPECT_NEAR(robot.truth().base[2], start[2] + 0.10, 0.01);
+  EXPECT_NEAR(robot.truth().base[1], start[1], 0.01);
+  EXPECT_EQ(robot.sensed().base, robot.truth().base);  // what tf world -> forearm publishes
+
+  // A reset puts the mocap body back at the base: no target pulls it away afterwards.
+  ASSERT_TRUE(robot.resetToKeyframe("home", &error)) << error;
+  for (int k = 0; k < 100; ++k) robot.step();
+  EXPECT_NEAR(robot.truth().base[2], start[2], 0.01);
+}
+
 }  // namespace
 }  // namespace adroit::driver

@@ -27,6 +27,9 @@ struct Signals {
   // Free object: position (3), quaternion w x y z (4), linear velocity in the world frame
   // (3), angular velocity in the object frame (3). Unused when the scene has no object.
   std::array<double, 13> object{};
+  // Teleop scenes: the hand base's pose in the world, position (3) and quaternion w x y z (4),
+  // as simulated (it follows the operator's own motion-capture stream). Unused otherwise.
+  std::array<double, 7> base{};
 };
 
 // True when every value of `s` is finite (no allocation; what may be published).

@@ -56,6 +56,11 @@ struct SimConfig {
   // range on impact, test StatesTheSimulationProducesAreAcceptedBack), and a state saved
   // there must be accepted back.
   double reset_range_margin = 0.15;     // ~reset_range_margin, fraction of the joint's range, in [0, 1]
+  // Teleop scenes: the hand base's mocap target moves towards the latest target pose at no
+  // more than these speeds, so a tracking glitch (a jump of the mocap stream) cannot fling the
+  // hand through the weld.
+  double max_base_speed = 2.0;          // ~max_base_speed, m/s
+  double max_base_angular_speed = 6.0;  // ~max_base_angular_speed, rad/s
   SensorRealism sensors;
 };
 

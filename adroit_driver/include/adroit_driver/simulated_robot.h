@@ -168,6 +168,15 @@ class SimulatedRobot {
   bool setObjectPose(const std::array<double, 3>& position, const std::array<double, 4>& quaternion,
                      const std::array<double, 3>& linear, const std::array<double, 3>& angular, std::string* error);
 
+  // Teleop scenes (free hand base welded to the mocap body hand_base_target): the pose the
+  // base is to follow, in the world frame (quaternion w x y z, normalised here). The mocap
+  // body moves towards it at most config().max_base_speed / max_base_angular_speed. Refused
+  // (false, *error) without a free base, with NaN/Inf, a zero quaternion, or beyond
+  // config().max_reset_distance from the origin. Allocates nothing unless refused.
+  bool setBaseTarget(const std::array<double, 3>& position, const std::array<double, 4>& quaternion,
+                     std::string* error);
+  bool hasFreeBase() const { return base_mocap_ >= 0; }
+  const char* baseFrame() const { return base_frame_; }  // the base body's name (tf child frame)
   // --- outputs ---
   const Signals& sensed() const { return sensors_.sensed(); }
   // Whether every value of sensed() is finite (a faulted plant can make them NaN); no
@@ -209,6 +218,8 @@ class SimulatedRobot {
   std::string faultText(const SafetyEvent& event) const;
   void computeTruth();
   void afterTeleport();  // recompute derived data and restart the sensors
+  void moveBaseTarget();  // the mocap body one step towards base_target_ (rate-limited)
+  void holdBaseWhereItIs();  // after a reset: the mocap body at the base, no target
   CommandResult acceptCommand(const CheckedCommand& checked);
 
   SimConfig config_;
@@ -217,6 +228,11 @@ class SimulatedRobot {
   NameIndex actuators_;
   std::vector<description::Cylinder> cylinders_;
   std::unique_ptr<pneumatics::PneumaticPlant> plant_;
+  // Teleop scenes: the free joint of the hand base, its mocap body, and the pose it follows.
+  int base_qpos_ = -1, base_mocap_ = -1;
+  const char* base_frame_ = "";
+  std::array<double, 7> base_target_{};
+  bool base_target_set_ = false;
   ValueLimits valve_limits_, force_limits_;
   CheckedCommand checked_;    // workspace of checkCommand, reserved: accepting a command does not allocate
   std::vector<char> seen_;

@@ -122,6 +122,8 @@ void SimDriver::onDiagnostics(const ros::WallTimerEvent&) {
                                          : std::string("normal"));
   const int publisher_fifo = publisher_fifo_priority_;
   s.add("publisher_scheduling", publisher_fifo > 0 ? "SCHED_FIFO " + std::to_string(publisher_fifo) : std::string("normal"));
+  const int safety_fifo = safety_fifo_priority_;
+  s.add("safety_scheduling", safety_fifo > 0 ? "SCHED_FIFO " + std::to_string(safety_fifo) : std::string("normal"));
   s.add("schedule_resyncs", total_resyncs_);
   s.add("safe_state", safety.safe_state);
   s.add("estop_latched", safety.estop_latched);

@@ -5,6 +5,8 @@
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <rosgraph_msgs/Clock.h>
 
+#include "adroit_core/scheduling.h"
+
 namespace adroit::driver {
 
 SimDriver::SimDriver(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh), io_(nh, "adroit") {
@@ -95,8 +97,17 @@ void SimDriver::start() {
   }
   publisher_ = std::thread(&SimDriver::publishLoop, this);
   thread_ = std::thread(&SimDriver::loop, this);
-  safety_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &safety_queue_);
-  safety_spinner_->start();
+  safety_running_ = true;
+  safety_thread_ = std::thread(&SimDriver::safetyLoop, this);
+}
+
+// The safety queue's one thread: e-stop, release, pause and every command. Real time: under
+// SCHED_FIFO just below the publisher, so a busy machine cannot hold commands back until the
+// watchdog trips (it sleeps while the queue is empty).
+void SimDriver::safetyLoop() {
+  if (params_.realtime && params_.realtime_priority > 2 && enterFifo(params_.realtime_priority - 2, nullptr))
+    safety_fifo_priority_ = params_.realtime_priority - 2;
+  while (safety_running_.load()) safety_queue_.callAvailable(ros::WallDuration(0.02));
 }
 
 void SimDriver::stop() {
@@ -110,7 +121,8 @@ void SimDriver::stop() {
   }
   work_cv_.notify_all();
   if (publisher_.joinable()) publisher_.join();
-  if (safety_spinner_) safety_spinner_->stop();
+  safety_running_ = false;
+  if (safety_thread_.joinable()) safety_thread_.join();
 }
 
 ros::Time SimDriver::stamp() const {

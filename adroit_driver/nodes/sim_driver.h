@@ -123,7 +123,7 @@ class SimDriver {
     bool markers = false;  // build markers from the snapshot (sim_markers.cpp)
     bool base = false;     // teleop scenes: tf world -> hand base
     // A command with a new stamp acted on for the first time in this step: its stamp and when
-    // the step was done (published on command_latency).
+    // the step began (published on command_latency).
     bool latency = false;
     ros::Time command_stamp, command_applied;
     double sim_clock = 0;
@@ -162,6 +162,7 @@ class SimDriver {
   // Safety queue (sim_services.cpp).
   void onValveCommand(const adroit_msgs::ValveCommand::ConstPtr& msg);
   void onForceCommand(const adroit_msgs::TendonForceCommand::ConstPtr& msg);
+  void safetyLoop();  // the safety queue's thread
   void onEstopInput(const std_msgs::Bool::ConstPtr& msg);
   void onBaseTarget(const geometry_msgs::PoseStamped::ConstPtr& msg);  // teleop scenes, default queue
   bool onPause(std_srvs::SetBool::Request& req, std_srvs::SetBool::Response& res);
@@ -190,7 +191,8 @@ class SimDriver {
   ros::NodeHandle nh_, io_;
   ros::CallbackQueue safety_queue_;
   ros::NodeHandle safety_io_;  // /adroit on safety_queue_
-  std::unique_ptr<ros::AsyncSpinner> safety_spinner_;
+  std::thread safety_thread_;  // runs safety_queue_ (safetyLoop)
+  std::atomic<bool> safety_running_{false};
   ros::Publisher joint_pub_, actuator_pub_, touch_pub_, odom_pub_, diag_pub_, safe_pub_, marker_pub_, clock_pub_;
   ros::Subscriber valve_sub_, force_sub_, estop_input_sub_, base_sub_;
   ros::Publisher latency_pub_;
@@ -251,6 +253,7 @@ class SimDriver {
   std::atomic<int> fifo_priority_{0};  // of the simulation thread now (0 = normal scheduling)
   std::atomic<int> thread_nice_{0};    // of the simulation thread now (lockstep)
   std::atomic<int> publisher_fifo_priority_{0};  // of the publisher thread (real time), 0 = normal
+  std::atomic<int> safety_fifo_priority_{0};     // of the safety thread (real time), 0 = normal
   std::atomic<long> sim_thread_id_{0};
   std::thread thread_;
 

@@ -132,6 +132,9 @@ void SimDriver::loop() {
       newest_command = last_command_stamp_;
     }
     const auto compute_start = SteadyClock::now();
+    // A command with a new stamp acts from this step on: note when the step starts.
+    const bool new_command = newest_command > applied_command_stamp_;
+    const double wall_start = new_command && !params_.use_sim_time ? ros::WallTime::now().toSec() : 0.0;
     double clock_after;
     {
       std::lock_guard<PiMutex> lock(robot_mutex_);
@@ -146,13 +149,15 @@ void SimDriver::loop() {
       steps_done_.store(robot_->counters().steps, std::memory_order_relaxed);
     }
     const auto compute_end = SteadyClock::now();
-    if (newest_command > applied_command_stamp_) {
+    if (new_command) {
       // The first step acting on a command with a new stamp (read before the step: a command
-      // noted during it counts for the next one, so the latency is never under-reported).
+      // noted during it counts for the next one, so the latency is never under-reported). It
+      // acts from the start of the step's interval: in sim time that clock; in real time the
+      // interval's scheduled start, or the wall time the step began if that was later.
       applied_command_stamp_ = latency_stamp_ = newest_command;
-      // Its state's time: sim time, or the real-time schedule's (the wall time if later).
-      latency_applied_ = params_.use_sim_time ? ros::Time(clock_after)
-                                               : ros::Time(std::max(wall_offset_ + clock_after, ros::WallTime::now().toSec()));
+      const double clock_before = clock_after - dt;
+      latency_applied_ = params_.use_sim_time ? ros::Time(clock_before)
+                                               : ros::Time(std::max(wall_offset_ + clock_before, wall_start));
       latency_due_ = true;
     }
     double lateness = -1;  // publication after the deadline (s), real time on schedule

@@ -2,6 +2,7 @@
 """train.launch pacing:=realtime: rollouts paced on the clock at the control rate through a
 driver running in real time lower the cost; between rollouts and after the job the driver's
 command watchdog never trips (keep-alive, then parked), so execute_policy runs next."""
+import math
 import os
 import tempfile
 import time
@@ -50,13 +51,14 @@ class TrainInRealTime(unittest.TestCase):
         time.sleep(0.5)
         self.assertTrue(safe_states, "no /adroit/safe_state received")
         self.assertNotIn(True, safe_states)
-        # The last controller that ran (final.tvlg is its untried update): its mean, paced on
-        # the clock as in training, is about as good as its noisy rollouts were.
-        result = execute(policy_path=progress[-1].policy_path)
-        self.assertTrue(result.success, result.message)
-        self.assertLess(result.final_cost, 1.5 * progress[-1].cost_mean)
-        final = execute(policy_path=os.path.join(out, "final.tvlg"))
-        self.assertTrue(final.success, final.message)
+        # Both saved controllers run on the driver, paced on the clock. Their cost is not
+        # compared: in real time the mean of a 6-iteration controller lands in one of several
+        # outcomes (one policy measured 156 to 773 over repeated runs); train.test checks the
+        # quality in lockstep, where runs are reproducible.
+        for path in (progress[-1].policy_path, os.path.join(out, "final.tvlg")):
+            result = execute(policy_path=path)
+            self.assertTrue(result.success, result.message)
+            self.assertTrue(math.isfinite(result.final_cost), result.message)
         time.sleep(0.5)
         self.assertNotIn(True, safe_states)
 

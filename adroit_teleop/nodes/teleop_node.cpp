@@ -33,6 +33,7 @@
 #include <std_msgs/String.h>
 #include <std_srvs/SetBool.h>
 #include <std_srvs/Trigger.h>
+#include <yaml-cpp/yaml.h>
 
 #include "adroit_ros/diagnostics.h"
 #include "adroit_ros/params.h"
@@ -293,19 +294,26 @@ class TeleopNode {
 
   // What a recorded demonstration needs to be understood later (latched, so rosbag gets it).
   void publishMetadata() {
-    std::ostringstream yaml;
-    yaml << "task: '" << params_.task << "'\nmodel: " << params_.model_path << "\nmode: " << params_.mode << "\ncalibration: " << params_.calibration_path
-         << "\ncalibration_created: '" << calibration_.created << "'\ncalibration_note: '" << calibration_.note
-         << "'\nsensors: " << calibration_.sensors() << "\ngains: {stiffness: " << params_.gains.stiffness
-         << ", damping: " << params_.gains.damping << ", min_tension: " << params_.gains.min_tension << "}\n";
     std::ifstream file(params_.calibration_path);
-    std::stringstream contents;
-    contents << file.rdbuf();
-    std::string indented;
-    for (std::string line; std::getline(contents, line);) indented += "  " + line + "\n";
-    yaml << "calibration_file: |\n" << indented;
+    std::stringstream calibration_file;
+    calibration_file << file.rdbuf();
+    YAML::Emitter yaml;
+    yaml << YAML::BeginMap;
+    yaml << YAML::Key << "task" << YAML::Value << params_.task;
+    yaml << YAML::Key << "model" << YAML::Value << params_.model_path;
+    yaml << YAML::Key << "mode" << YAML::Value << params_.mode;
+    yaml << YAML::Key << "calibration" << YAML::Value << params_.calibration_path;
+    yaml << YAML::Key << "calibration_created" << YAML::Value << calibration_.created;
+    yaml << YAML::Key << "calibration_note" << YAML::Value << calibration_.note;
+    yaml << YAML::Key << "sensors" << YAML::Value << calibration_.sensors();
+    yaml << YAML::Key << "gains" << YAML::Value << YAML::Flow << YAML::BeginMap;
+    yaml << YAML::Key << "stiffness" << YAML::Value << params_.gains.stiffness;
+    yaml << YAML::Key << "damping" << YAML::Value << params_.gains.damping;
+    yaml << YAML::Key << "min_tension" << YAML::Value << params_.gains.min_tension << YAML::EndMap;
+    yaml << YAML::Key << "calibration_file" << YAML::Value << YAML::Literal << calibration_file.str();
+    yaml << YAML::EndMap;
     std_msgs::String m;
-    m.data = yaml.str();
+    m.data = yaml.c_str();
     metadata_pub_.publish(m);
   }
 

@@ -10,7 +10,9 @@ import unittest
 
 import rospy
 import rostest
+import tf2_ros
 from adroit_msgs.msg import CommandLatency, GloveSensors, TendonForceCommand
+from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 
@@ -116,6 +118,29 @@ class TeleopPipeline(unittest.TestCase):
         self.assertGreater(len(rec.since(rec.commands, again + 0.5)), 100, "no commands after the new press")
         safe = rec.since(rec.safe, again)
         self.assertTrue(safe and safe[-1].data is False, "the watchdog latch was not released by the press")
+
+        # Motion capture moves the hand's base (thesis 9.2.3); a pose in another frame does not.
+        buf = tf2_ros.Buffer()
+        tf2_ros.TransformListener(buf)
+        start_pose = buf.lookup_transform("world", "forearm", rospy.Time(0), rospy.Duration(10)).transform
+        target = rospy.Publisher("/adroit/hand_base/target", PoseStamped, queue_size=1, latch=True)
+        wrong = PoseStamped()
+        wrong.header.frame_id = "camera"
+        wrong.pose.position.z = start_pose.translation.z + 0.3
+        wrong.pose.orientation = start_pose.rotation
+        target.publish(wrong)
+        time.sleep(1.0)
+        held = buf.lookup_transform("world", "forearm", rospy.Time(0), rospy.Duration(5)).transform
+        self.assertAlmostEqual(held.translation.z, start_pose.translation.z, delta=0.01)
+        up = PoseStamped()
+        up.header.frame_id = "world"
+        up.pose.position.x, up.pose.position.y = start_pose.translation.x, start_pose.translation.y
+        up.pose.position.z = start_pose.translation.z + 0.05
+        up.pose.orientation = start_pose.rotation
+        target.publish(up)
+        time.sleep(1.5)
+        moved = buf.lookup_transform("world", "forearm", rospy.Time(0), rospy.Duration(5)).transform
+        self.assertAlmostEqual(moved.translation.z, start_pose.translation.z + 0.05, delta=0.01)
 
 
     @staticmethod

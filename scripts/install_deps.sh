@@ -34,6 +34,8 @@ PACKAGES=(
   # the workspace's own tests: its result counting; readelf for the check that no core
   # library links a ROS library (scripts/test_core_links.py)
   python3-pytest binutils
+  # the fuzz stage (scripts/test_fuzz.sh): clang with libFuzzer and its sanitizer runtimes
+  clang libclang-rt-14-dev
   # generate_model.py reads the cylinder catalogue adroit_description/config/cylinders.yaml
   python3-yaml
   # screenshots of rviz under a virtual display; offscreen MuJoCo frames (render_states: a

@@ -28,6 +28,9 @@ sanitizer_start=$SECONDS
 "$here/test_sanitizers.sh" || failed_commands+=("sanitizer stage")
 echo "sanitizer stage (ASan+UBSan build and gtests): $((SECONDS - sanitizer_start)) s wall time added"
 
+# Fuzz stage: the CAN frame decoders' libFuzzer harness for 60 s (scripts/test_fuzz.sh).
+"$here/test_fuzz.sh" 60 || failed_commands+=("fuzz stage")
+
 # The workspace scripts' own tests (the result counting below; that no core library links a
 # ROS library), one result file each, through catkin's wrapper like every package test: no
 # result file gives a MISSING failure.

@@ -681,6 +681,27 @@ bool SimulatedRobot::resetToState(const std::vector<double>& qpos, const std::ve
   return true;
 }
 
+bool SimulatedRobot::checkPose(const std::array<double, 3>& position, const std::array<double, 4>& quaternion,
+                               double* norm, std::string* error) const {
+  auto fail = [&](const std::string& what) {
+    if (error) *error = what;
+    return false;
+  };
+  for (double v : position) if (!std::isfinite(v)) return fail("position contains NaN or Inf");
+  *norm = 0;
+  for (double v : quaternion) {
+    if (!std::isfinite(v)) return fail("orientation contains NaN or Inf");
+    *norm += v * v;
+  }
+  *norm = std::sqrt(*norm);
+  if (*norm < 1e-6) return fail("orientation is not a quaternion (norm ~ 0)");
+  const double distance = std::hypot(position[0], position[1], position[2]);
+  if (distance > config_.max_reset_distance)
+    return fail("position is " + format(distance) + " m from the origin, beyond max_reset_distance " +
+                format(config_.max_reset_distance) + " m");
+  return true;
+}
+
 bool SimulatedRobot::setBaseTarget(const std::array<double, 3>& position, const std::array<double, 4>& quaternion,
                                    std::string* error) {
   auto fail = [&](const std::string& what) {
@@ -688,18 +709,8 @@ bool SimulatedRobot::setBaseTarget(const std::array<double, 3>& position, const 
     return false;
   };
   if (base_mocap_ < 0) return fail("the scene has no free hand base (teleop scenes: teleop_tube, teleop_ball)");
-  for (double v : position) if (!std::isfinite(v)) return fail("position contains NaN or Inf");
   double norm = 0;
-  for (double v : quaternion) {
-    if (!std::isfinite(v)) return fail("orientation contains NaN or Inf");
-    norm += v * v;
-  }
-  norm = std::sqrt(norm);
-  if (norm < 1e-6) return fail("orientation is not a quaternion (norm ~ 0)");
-  const double distance = std::hypot(position[0], position[1], position[2]);
-  if (distance > config_.max_reset_distance)
-    return fail("position is " + format(distance) + " m from the origin, beyond max_reset_distance " +
-                format(config_.max_reset_distance) + " m");
+  if (!checkPose(position, quaternion, &norm, error)) return false;
   for (int k = 0; k < 3; ++k) base_target_[k] = position[k];
   for (int k = 0; k < 4; ++k) base_target_[3 + k] = quaternion[k] / norm;
   base_target_set_ = true;
@@ -757,20 +768,10 @@ bool SimulatedRobot::setObjectPose(const std::array<double, 3>& position, const 
     return false;
   };
   if (object_body_ < 0) return fail("the scene has no free body named 'object'");
-  for (double v : position) if (!std::isfinite(v)) return fail("position contains NaN or Inf");
+  double norm = 0;
+  if (!checkPose(position, quaternion, &norm, error)) return false;
   for (double v : linear) if (!std::isfinite(v)) return fail("linear velocity contains NaN or Inf");
   for (double v : angular) if (!std::isfinite(v)) return fail("angular velocity contains NaN or Inf");
-  double norm = 0;
-  for (double v : quaternion) {
-    if (!std::isfinite(v)) return fail("orientation contains NaN or Inf");
-    norm += v * v;
-  }
-  norm = std::sqrt(norm);
-  if (norm < 1e-6) return fail("orientation is not a quaternion (norm ~ 0)");
-  const double distance = std::hypot(position[0], position[1], position[2]);
-  if (distance > config_.max_reset_distance)
-    return fail("position is " + format(distance) + " m from the origin, beyond max_reset_distance " +
-                format(config_.max_reset_distance) + " m");
   for (const auto* velocity : {&linear, &angular})
     for (double v : *velocity)
       if (std::abs(v) > config_.max_reset_velocity)

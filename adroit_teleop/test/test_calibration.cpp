@@ -11,6 +11,8 @@
 #include <random>
 #include <regex>
 
+#include "temp_dir.h"
+
 using namespace adroit::teleop;
 
 namespace {
@@ -23,20 +25,7 @@ std::vector<std::string> names(int J) {
 
 std::vector<JointRange> wide(int J) { return std::vector<JointRange>(J, JointRange{-100, 100}); }
 
-// One scratch directory per test process, removed with its files at exit.
-const std::string& scratchDir() {
-  static const struct Dir {
-    std::string path;
-    Dir() {
-      char tmpl[] = "/tmp/adroit_teleop_test_XXXXXX";
-      if (mkdtemp(tmpl)) path = tmpl;
-    }
-    ~Dir() {
-      if (!path.empty()) std::filesystem::remove_all(path);
-    }
-  } dir;
-  return dir.path;
-}
+using adroit::teleop::test::scratchDir;
 
 std::string tempPath(const std::string& name) { return scratchDir() + "/" + name; }
 

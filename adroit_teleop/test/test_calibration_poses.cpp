@@ -11,6 +11,8 @@
 #include <random>
 #include <set>
 
+#include "temp_dir.h"
+
 using namespace adroit::teleop;
 
 namespace {
@@ -53,20 +55,7 @@ const CalibrationPose& poseNamed(const CalibrationPoseSet& set, const std::strin
   throw std::runtime_error("no pose " + name);
 }
 
-// One scratch directory per test process, removed with its files at exit.
-const std::string& scratchDir() {
-  static const struct Dir {
-    std::string path;
-    Dir() {
-      char tmpl[] = "/tmp/adroit_teleop_test_XXXXXX";
-      if (mkdtemp(tmpl)) path = tmpl;
-    }
-    ~Dir() {
-      if (!path.empty()) std::filesystem::remove_all(path);
-    }
-  } dir;
-  return dir.path;
-}
+using adroit::teleop::test::scratchDir;
 
 std::string posesPath() { return scratchDir() + "/poses.yaml"; }
 

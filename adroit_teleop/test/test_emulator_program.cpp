@@ -19,6 +19,8 @@
 #include <sstream>
 #include <thread>
 
+#include "temp_dir.h"
+
 using namespace adroit::teleop;
 using namespace std::chrono_literals;
 using Clock = std::chrono::steady_clock;
@@ -26,22 +28,7 @@ using Bytes = std::vector<std::uint8_t>;
 
 namespace {
 
-// A fresh directory, removed with everything in it at the end of the test.
-class TempDir {
- public:
-  TempDir() {
-    char tmpl[] = "/tmp/adroit_glove_emulator_XXXXXX";
-    const char* dir = mkdtemp(tmpl);
-    path_ = dir ? dir : "";
-  }
-  ~TempDir() {
-    if (!path_.empty()) std::filesystem::remove_all(path_);
-  }
-  const std::string& path() const { return path_; }
-
- private:
-  std::string path_;
-};
+using adroit::teleop::test::TempDir;
 
 bool exists(const std::string& path) {
   struct stat st {};

@@ -9,6 +9,8 @@
 #include <filesystem>
 #include <fstream>
 
+#include "temp_dir.h"
+
 using namespace adroit::teleop;
 using Bytes = std::vector<std::uint8_t>;
 
@@ -24,20 +26,7 @@ Bytes answer(GloveEmulator& glove, const Bytes& in, double t) {
   return out.bytes;
 }
 
-// One scratch directory per test process, removed with its files at exit.
-const std::string& scratchDir() {
-  static const struct Dir {
-    std::string path;
-    Dir() {
-      char tmpl[] = "/tmp/adroit_teleop_test_XXXXXX";
-      if (mkdtemp(tmpl)) path = tmpl;
-    }
-    ~Dir() {
-      if (!path.empty()) std::filesystem::remove_all(path);
-    }
-  } dir;
-  return dir.path;
-}
+using adroit::teleop::test::scratchDir;
 
 std::string writeTemp(const std::string& name, const std::string& text) {
   const std::string path = scratchDir() + "/" + name;

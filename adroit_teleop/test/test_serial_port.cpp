@@ -17,28 +17,15 @@
 #include <functional>
 #include <thread>
 
+#include "temp_dir.h"
+
 using namespace adroit::teleop;
 using namespace std::chrono_literals;
 using Bytes = std::vector<std::uint8_t>;
 
 namespace {
 
-// A fresh directory, removed with everything in it at the end of the test.
-class TempDir {
- public:
-  TempDir() {
-    char tmpl[] = "/tmp/adroit_teleop_port_XXXXXX";
-    const char* dir = mkdtemp(tmpl);
-    path_ = dir ? dir : "";
-  }
-  ~TempDir() {
-    if (!path_.empty()) std::filesystem::remove_all(path_);
-  }
-  const std::string& path() const { return path_; }
-
- private:
-  std::string path_;
-};
+using adroit::teleop::test::TempDir;
 
 std::string errorOf(const std::function<void()>& f) {
   try {

@@ -220,6 +220,10 @@ class SimulatedRobot {
   void afterTeleport();  // recompute derived data and restart the sensors
   void moveBaseTarget();  // the mocap body one step towards base_target_ (rate-limited)
   void holdBaseWhereItIs();  // after a reset: the mocap body at the base, no target
+  // A world pose as set_object_pose and hand_base/target take it: finite, a quaternion of
+  // non-zero norm (returned in *norm), within max_reset_distance. Allocates only on refusal.
+  bool checkPose(const std::array<double, 3>& position, const std::array<double, 4>& quaternion, double* norm,
+                 std::string* error) const;
   CommandResult acceptCommand(const CheckedCommand& checked);
 
   SimConfig config_;

@@ -36,7 +36,8 @@
 
 #include "adroit_core/timing_stats.h"
 #include "adroit_description/scenes.h"
-#include "sim_driver.h"
+#include "adroit_driver/simulated_robot.h"
+#include "robot_driver.h"
 
 using adroit::Stopwatch;
 using namespace adroit::driver;
@@ -205,7 +206,8 @@ Phase pairedPhase(const std::string& label, const std::string& ns, const std::st
 
   setDriverParams(ns, scene, false);
   ros::param::set(ns + "/start_paused", true);
-  SimDriver driver{ros::NodeHandle(), ros::NodeHandle(ns)};
+  const auto owned = makeSimDriver(ros::NodeHandle(), ros::NodeHandle(ns));
+  RobotDriver& driver = *owned;
   driver.start();
   ros::NodeHandle nh;
   ros::ServiceClient step = nh.serviceClient<adroit_msgs::Step>("/adroit/step", true);
@@ -384,7 +386,8 @@ int main(int argc, char** argv) {
   std::vector<double> intervals;
   double rtf = 0;
   {
-    SimDriver driver(ros::NodeHandle(), ros::NodeHandle("/bench_realtime"));
+    const auto owned = makeSimDriver(ros::NodeHandle(), ros::NodeHandle("/bench_realtime"));
+    RobotDriver& driver = *owned;
     driver.collectJointIntervals(true);
     driver.start();
     std::this_thread::sleep_for(std::chrono::seconds(1));

@@ -3,13 +3,13 @@
 
 #include <cstdio>
 
-#include "sim_driver.h"
+#include "robot_driver.h"
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "adroit_sim");
-  std::unique_ptr<adroit::driver::SimDriver> driver;
+  std::unique_ptr<adroit::driver::RobotDriver> driver;
   try {
-    driver = std::make_unique<adroit::driver::SimDriver>(ros::NodeHandle(), ros::NodeHandle("~"));
+    driver = adroit::driver::makeSimDriver(ros::NodeHandle(), ros::NodeHandle("~"));
   } catch (const std::exception& e) {
     // One line on stderr (rosconsole prints nothing before the node has started).
     std::fprintf(stderr, "[FATAL] adroit_sim: %s\n", e.what());

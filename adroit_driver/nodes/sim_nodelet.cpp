@@ -1,8 +1,8 @@
-// The simulation driver as a nodelet: the same SimDriver class as the adroit_sim node.
+// The simulation driver as a nodelet: the same RobotDriver class as the adroit_sim node.
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 
-#include "sim_driver.h"
+#include "robot_driver.h"
 
 namespace adroit::driver {
 
@@ -17,7 +17,7 @@ class SimNodelet : public nodelet::Nodelet {
     try {
       // The multi-threaded handles: a long /step must not hold up diagnostics (the safety
       // path has its own queue and thread inside the driver).
-      driver_ = std::make_unique<SimDriver>(getMTNodeHandle(), getMTPrivateNodeHandle());
+      driver_ = makeSimDriver(getMTNodeHandle(), getMTPrivateNodeHandle());
     } catch (const std::exception& e) {
       // A nodelet cannot exit its manager: report and stay inert.
       NODELET_FATAL("adroit_sim: %s", e.what());
@@ -25,7 +25,7 @@ class SimNodelet : public nodelet::Nodelet {
     }
     driver_->start();
   }
-  std::unique_ptr<SimDriver> driver_;
+  std::unique_ptr<RobotDriver> driver_;
 };
 
 }  // namespace adroit::driver

@@ -1,10 +1,11 @@
-// ~parameters of the simulation driver -> DriverParams, refusing bad values with one line
-// that names the parameter.
+// ~parameters of the simulation driver -> DriverParams + SimConfig, refusing bad values with
+// one line that names the parameter; makeSimDriver builds the simulation driver from them.
 #include <ros/param.h>
 
 #include <cmath>
 
-#include "sim_driver.h"
+#include "adroit_driver/simulated_robot.h"
+#include "robot_driver.h"
 
 namespace adroit::driver {
 
@@ -19,10 +20,8 @@ int stepsPerPublication(const std::string& name, double rate, double timestep) {
   return steps;
 }
 
-DriverParams readParams(const ros::NodeHandle& pnh) {
-  const rosutil::Params p(pnh);
-  DriverParams out;
-  SimConfig& c = out.sim;
+SimConfig readSimConfig(const rosutil::Params& p) {
+  SimConfig c;
   c.model_path = p.modelPath("arm_hand");
   const std::string mode = p.string("mode", "pneumatic");
   const auto parsed = parseMode(mode);
@@ -55,12 +54,22 @@ DriverParams readParams(const ros::NodeHandle& pnh) {
   s.object_delay = p.number("sensors/object_delay", s.object_delay);
   const std::string invalid = validate(c);
   if (!invalid.empty()) throw ParameterError("bad parameter " + invalid);
+  return c;
+}
 
-  out.realtime = p.boolean("realtime", out.realtime);
-  out.start_paused = p.boolean("start_paused", out.start_paused);
-  ros::param::param<bool>("/use_sim_time", out.use_sim_time, false);
-  if (!out.realtime && !out.use_sim_time)
-    p.fail("realtime", "false (lockstep) needs /use_sim_time: true so that every node follows /clock");
+DriverParams readDriverParams(const rosutil::Params& p, bool simulated) {
+  DriverParams out;
+  if (simulated) {
+    out.realtime = p.boolean("realtime", out.realtime);
+    out.start_paused = p.boolean("start_paused", out.start_paused);
+    ros::param::param<bool>("/use_sim_time", out.use_sim_time, false);
+    if (!out.realtime && !out.use_sim_time)
+      p.fail("realtime", "false (lockstep) needs /use_sim_time: true so that every node follows /clock");
+  } else {
+    bool sim_time = false;
+    ros::param::param<bool>("/use_sim_time", sim_time, false);
+    if (sim_time) throw ParameterError("bad parameter /use_sim_time: true, but a real robot runs on wall time");
+  }
   out.joint_state_rate = p.number("joint_state_rate", out.joint_state_rate);
   out.actuator_state_rate = p.number("actuator_state_rate", out.actuator_state_rate);
   out.touch_rate = p.number("touch_rate", out.touch_rate);
@@ -71,6 +80,23 @@ DriverParams readParams(const ros::NodeHandle& pnh) {
   out.diagnostics_period = p.number("diagnostics_period", out.diagnostics_period, 0.05, 60);
   out.never_commanded_grace = p.number("never_commanded_grace", out.never_commanded_grace, 0, 3600);
   return out;
+}
+
+std::unique_ptr<RobotDriver> makeSimDriver(ros::NodeHandle nh, ros::NodeHandle pnh) {
+  const rosutil::Params p(pnh);
+  const SimConfig config = readSimConfig(p);
+  DriverParams params = readDriverParams(p, true);
+  std::unique_ptr<Robot> robot;
+  try {
+    robot = std::make_unique<SimulatedRobot>(config);
+  } catch (const std::invalid_argument& e) {
+    throw ParameterError(std::string("bad parameter ") + e.what());
+  } catch (const std::runtime_error& e) {  // ModelLoadError and cylinder table errors
+    throw ParameterError(std::string("bad parameter ~scene/~model_file: ") + e.what());
+  }
+  ROS_INFO("adroit_sim: sensor realism %s (seed %lu)", config.sensors.enabled ? "on" : "off",
+           static_cast<unsigned long>(config.sensors.seed));
+  return std::make_unique<RobotDriver>(nh, std::move(params), std::move(robot), "adroit_sim");
 }
 
 }  // namespace adroit::driver

@@ -19,7 +19,8 @@
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <visualization_msgs/MarkerArray.h>
 
-#include "sim_driver.h"
+#include "adroit_driver/simulated_robot.h"
+#include "robot_driver.h"
 
 namespace {
 std::atomic<long> g_counted_thread{0};      // kernel tid whose allocations count (0 = none)
@@ -56,7 +57,7 @@ using Clock = std::chrono::steady_clock;
 // Allocations on the simulation thread while `steps` more steps are simulated and at least
 // `min_wall` seconds pass (so that diagnostics swap the timing buffers and markers are
 // snapshot inside the window), with valve commands sent all along from this thread.
-std::uint64_t allocationsOver(adroit::driver::SimDriver& driver, std::uint64_t steps, ros::Publisher& valves,
+std::uint64_t allocationsOver(adroit::driver::RobotDriver& driver, std::uint64_t steps, ros::Publisher& valves,
                               double min_wall = 0) {
   adroit_msgs::ValveCommand cmd;
   cmd.index = {0, 1, 2, 3};
@@ -79,7 +80,8 @@ std::uint64_t allocationsOver(adroit::driver::SimDriver& driver, std::uint64_t s
 TEST(SimulationThread, AllocatesNothingWhileStepping) {
   ros::NodeHandle nh, pnh("~");
   const bool lockstep = !pnh.param("realtime", true);
-  adroit::driver::SimDriver driver(nh, ros::NodeHandle("~driver"));
+  const auto owned = adroit::driver::makeSimDriver(nh, ros::NodeHandle("~driver"));
+  adroit::driver::RobotDriver& driver = *owned;
   ros::Publisher valves = nh.advertise<adroit_msgs::ValveCommand>("/adroit/valve_command", 100);
   int markers = 0, diagnostics = 0;
   auto marker_sub = nh.subscribe<visualization_msgs::MarkerArray>("/adroit/markers", 5,

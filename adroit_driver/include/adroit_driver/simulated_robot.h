@@ -18,6 +18,7 @@
 #include "adroit_core/mujoco_model.h"
 #include "adroit_description/cylinders.h"
 #include "adroit_driver/command_check.h"
+#include "adroit_driver/robot.h"
 #include "adroit_driver/sensor_pipeline.h"
 #include "adroit_driver/sim_config.h"
 #include "adroit_pneumatics/plant.h"
@@ -40,73 +41,7 @@ struct SimState {
   double sensors_clock = 0;  // clock() when captured (the sensors' delay lines use it)
 };
 
-enum class SafeCause { kNone = 0, kEstop = 1, kWatchdog = 2, kFault = 4 };
-
-// What a fault found not finite (or, for qpos/qvel/qacc, also beyond MuJoCo's mjMAXVAL).
-enum class FaultSource { kNone, kQpos, kQvel, kQacc, kCommand, kPressure, kTension };
-
-// One safety event: an e-stop, a watchdog trip or a fault entering its latch. Plain data,
-// recorded by the simulation thread without formatting anything; describe() turns it into
-// text on whichever thread logs it.
-struct SafetyEvent {
-  std::uint64_t sequence = 0;  // Counters::safety_events right after this event; 0 = none yet
-  SafeCause cause = SafeCause::kNone;
-  double clock = 0;            // clock() when it happened (start of the step for step events)
-  int cylinder = -1;           // watchdog: the stalest commanded cylinder; fault of a command,
-                               // pressure or tension: that cylinder; else -1
-  FaultSource fault = FaultSource::kNone;
-  int index = -1;              // fault of qpos/qvel/qacc: the address in that array
-};
-
-// The latest event of each kind. Not cleared by release(): a logger that compares
-// `last.sequence` with the one it saw last finds each event exactly once (events between
-// two looks are counted by Counters::safety_events; only the latest of a kind is kept).
-struct SafetyEvents {
-  SafetyEvent last;      // any kind
-  SafetyEvent estop;
-  SafetyEvent watchdog;
-  SafetyEvent fault;
-};
-
-struct SafetyStatus {
-  bool safe_state = false;      // supply exhausted, every valve open to exhaust
-  bool estop_latched = false;
-  bool estop_input = false;     // the physical e-stop button is held
-  bool watchdog_latched = false;
-  bool fault_latched = false;
-  bool fault_persists = false;  // the last physics step faulted
-  bool watchdog_armed = false;  // a command has been received since start / release
-  std::string fault;            // description of the fault that entered the latch
-};
-
-struct Counters {
-  std::uint64_t steps = 0;
-  std::uint64_t accepted = 0;
-  std::uint64_t clamped = 0;
-  std::uint64_t rejected_addressing = 0;  // both/neither, length mismatch, duplicates
-  std::uint64_t rejected_name = 0;        // unknown names, indices out of range
-  std::uint64_t rejected_not_finite = 0;
-  std::uint64_t rejected_range = 0;
-  std::uint64_t rejected_wrong_mode = 0;  // valve command in force mode or vice versa
-  std::uint64_t ignored_while_safe = 0;   // valid commands ignored while latched
-  std::uint64_t watchdog_trips = 0;
-  std::uint64_t estops = 0;
-  std::uint64_t faults = 0;               // fault events: entries into the fault latch (bad
-                                          // qpos/qvel/qacc, non-finite command/pressure/tension)
-  std::uint64_t faulted_steps = 0;        // physics steps refused while a fault persists
-  std::uint64_t safety_events = 0;        // estops + watchdog_trips + faults: the sequence of SafetyEvent
-  std::uint64_t rejected() const {
-    return rejected_addressing + rejected_name + rejected_not_finite + rejected_range + rejected_wrong_mode;
-  }
-};
-
-struct CommandResult {
-  CommandVerdict verdict = CommandVerdict::kEmpty;
-  bool applied = false;  // false when rejected or ignored while in the safe state
-  std::string error;
-};
-
-class SimulatedRobot {
+class SimulatedRobot final : public Robot {
  public:
   // Throws ModelLoadError (MuJoCo's message and the path) or std::invalid_argument.
   explicit SimulatedRobot(const SimConfig& config);
@@ -122,38 +57,38 @@ class SimulatedRobot {
   // the robot (it allocates the result); apply*() then counts and applies under the
   // caller's lock. apply*() takes only what check*() of this robot returned.
   CheckedCommand checkValves(const std::vector<std::string>& names, const std::vector<std::uint16_t>& indices,
-                             const std::vector<double>& volts) const;
+                             const std::vector<double>& volts) const override;
   CheckedCommand checkForces(const std::vector<std::string>& names, const std::vector<std::uint16_t>& indices,
-                             const std::vector<double>& newtons) const;
-  CommandResult applyValves(const CheckedCommand& checked);
-  CommandResult applyForces(const CheckedCommand& checked);
+                             const std::vector<double>& newtons) const override;
+  CommandResult applyValves(const CheckedCommand& checked) override;
+  CommandResult applyForces(const CheckedCommand& checked) override;
 
   // --- one physics step (config.timestep) ---
-  void step();
+  void step() override;
 
   // --- safety ---
-  void estop();                        // software e-stop: latch the safe state
-  void setEstopInput(bool held);       // the physical button; held latches the safe state
-  // Leaves the safe state unless a cause persists (input held, physics still faulting);
+  void estop() override;               // software e-stop: latch the safe state
+  void setEstopInput(bool held) override;  // the physical button; held latches the safe state
+  // Leaves the safe state unless a cause persists (input held, physics still faulting) override;
   // on refusal returns false and says why.
-  bool release(std::string* why);
-  const SafetyStatus& safety() const { return safety_; }
-  const Counters& counters() const { return counters_; }
-  const SafetyEvents& safetyEvents() const { return events_; }
+  bool release(std::string* why) override;
+  const SafetyStatus& safety() const override { return safety_; }
+  const Counters& counters() const override { return counters_; }
+  const SafetyEvents& safetyEvents() const override { return events_; }
   // One line for an event, e.g. "watchdog: 'A_FFJ3_flex' not commanded for 0.05 s (clock
   // 12.3 s)". Reads only the model's names, which never change: callable from any thread.
-  std::string describe(const SafetyEvent& event) const;
+  std::string describe(const SafetyEvent& event) const override;
   // Cylinders without an accepted command since start or the last release: the watchdog
   // does not watch them (a pool that never started leaves them at idle). O(1).
-  std::size_t neverCommanded() const { return never_commanded_; }
-  bool everCommanded(std::size_t cylinder) const { return last_command_clock_[cylinder] != kNeverCommanded; }
+  std::size_t neverCommanded() const override { return never_commanded_; }
+  bool everCommanded(std::size_t cylinder) const override { return last_command_clock_[cylinder] != kNeverCommanded; }
 
   // --- state ---
   SimState state() const;
   // Throws std::invalid_argument when sizes do not match this model.
   void setState(const SimState& state);
   // Model default (keyframe 0 if present), or a named keyframe. Pressures atmospheric.
-  bool resetToKeyframe(const std::string& keyframe, std::string* error);
+  bool resetToKeyframe(const std::string& keyframe, std::string* error) override;
   // Full state: empty qpos = model default, empty qvel = zeros, empty pressure = atmospheric.
   // Refused (with the joint's name and value) when a limited hinge/slide joint is outside
   // its range by more than config().reset_range_margin of it, a free or ball joint's
@@ -161,12 +96,13 @@ class SimulatedRobot {
   // from the origin, or a velocity exceeds config().max_reset_velocity: such states would
   // only fault in the next step.
   bool resetToState(const std::vector<double>& qpos, const std::vector<double>& qvel,
-                    const std::vector<double>& pressure, std::string* error);
+                    const std::vector<double>& pressure, std::string* error) override;
   // World-frame pose (quaternion w x y z, normalised here) and velocity of the free object.
   // Refused beyond config().max_reset_distance from the origin or with a velocity component
   // above config().max_reset_velocity.
   bool setObjectPose(const std::array<double, 3>& position, const std::array<double, 4>& quaternion,
-                     const std::array<double, 3>& linear, const std::array<double, 3>& angular, std::string* error);
+                     const std::array<double, 3>& linear, const std::array<double, 3>& angular,
+                     std::string* error) override;
 
   // Teleop scenes (free hand base welded to the mocap body hand_base_target): the pose the
   // base is to follow, in the world frame (quaternion w x y z, normalised here). The mocap
@@ -174,31 +110,35 @@ class SimulatedRobot {
   // (false, *error) without a free base, with NaN/Inf, a zero quaternion, or beyond
   // config().max_reset_distance from the origin. Allocates nothing unless refused.
   bool setBaseTarget(const std::array<double, 3>& position, const std::array<double, 4>& quaternion,
-                     std::string* error);
-  bool hasFreeBase() const { return base_mocap_ >= 0; }
-  const char* baseFrame() const { return base_frame_; }  // the base body's name (tf child frame)
+                     std::string* error) override;
+  bool hasFreeBase() const override { return base_mocap_ >= 0; }
+  const char* baseFrame() const override { return base_frame_; }  // the base body's name (tf child frame)
   // --- outputs ---
-  const Signals& sensed() const { return sensors_.sensed(); }
+  const Signals& sensed() const override { return sensors_.sensed(); }
   // Whether every value of sensed() is finite (a faulted plant can make them NaN); no
   // allocation, a pass over a few hundred values.
-  bool sensedIsFinite() const { return allFinite(sensors_.sensed()); }
-  const Signals& truth() const { return truth_; }
-  const std::vector<double>& appliedCommand() const { return applied_command_; }  // volts or N
+  bool sensedIsFinite() const override { return allFinite(sensors_.sensed()); }
+  const Signals& truth() const override { return truth_; }
+  const std::vector<double>& appliedCommand() const override { return applied_command_; }  // volts or N
 
   // --- model information ---
-  double clock() const { return clock_; }
-  double timestep() const { return config_.timestep; }
+  double clock() const override { return clock_; }
+  double timestep() const override { return config_.timestep; }
   const SimConfig& config() const { return config_; }
-  const mjModel* model() const { return model_.get(); }
-  const mjData* data() const { return data_.get(); }
-  const std::vector<std::string>& jointNames() const { return joint_names_; }
-  const std::vector<std::string>& cylinderNames() const { return actuators_.names(); }
-  const std::vector<description::Cylinder>& cylinders() const { return cylinders_; }
-  const std::vector<std::string>& touchNames() const { return touch_names_; }
-  bool hasObject() const { return object_body_ >= 0; }
-  int objectBody() const { return object_body_; }
-  double atmosphericPressure() const { return description::kAtmosphericPressure; }
+  const mjModel* model() const override { return model_.get(); }
+  const mjData* data() const override { return data_.get(); }
+  const std::vector<std::string>& jointNames() const override { return joint_names_; }
+  const std::vector<std::string>& cylinderNames() const override { return actuators_.names(); }
+  const std::vector<description::Cylinder>& cylinders() const override { return cylinders_; }
+  const std::vector<std::string>& touchNames() const override { return touch_names_; }
+  bool hasObject() const override { return object_body_ >= 0; }
+  int objectBody() const override { return object_body_; }
   const pneumatics::PneumaticPlant* plant() const { return plant_.get(); }
+  bool simulated() const override { return true; }
+  ActuationMode mode() const override { return config_.mode; }
+  double watchdogTimeout() const override { return config_.watchdog_timeout; }
+  double supplyPressure() const override { return config_.supply_pressure; }
+  const std::string& modelPath() const override { return config_.model_path; }
 
  private:
   // last_command_clock_ of a cylinder not commanded since start or the last release.

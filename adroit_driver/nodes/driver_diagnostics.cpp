@@ -6,11 +6,11 @@
 #include <diagnostic_msgs/DiagnosticStatus.h>
 
 #include "adroit_ros/diagnostics.h"
-#include "sim_driver.h"
+#include "robot_driver.h"
 
 namespace adroit::driver {
 
-void SimDriver::publishSafeStateIfChanged() {
+void RobotDriver::publishSafeStateIfChanged() {
   bool safe;
   {
     std::lock_guard<PiMutex> lock(robot_mutex_);
@@ -25,7 +25,7 @@ void SimDriver::publishSafeStateIfChanged() {
   safe_pub_.publish(msg);
 }
 
-void SimDriver::onSafetyMonitor(const ros::WallTimerEvent&) {
+void RobotDriver::onSafetyMonitor(const ros::WallTimerEvent&) {
   markers_wanted_ = marker_pub_.getNumSubscribers() > 0;
   SafetyEvents events;
   Counters counters;
@@ -41,21 +41,21 @@ void SimDriver::onSafetyMonitor(const ros::WallTimerEvent&) {
     const std::uint64_t missed = now - seen - 1;
     seen = now;
     if (missed > 0)
-      ROS_WARN("adroit_sim: safe state: %s (%lu more %s events before it)", robot_->describe(latest).c_str(),
+      ROS_WARN("%s: safe state: %s (%lu more %s events before it)", name_, robot_->describe(latest).c_str(),
                static_cast<unsigned long>(missed), what);
     else
-      ROS_WARN("adroit_sim: safe state: %s", robot_->describe(latest).c_str());
+      ROS_WARN("%s: safe state: %s", name_, robot_->describe(latest).c_str());
   };
   report(counters.watchdog_trips, logged_.watchdog_trips, events.watchdog, "watchdog");
   if (counters.faults != logged_.faults) {  // a fault is an error, not a warning
-    ROS_ERROR("adroit_sim: safe state: %s; reset, then /adroit/estop_release", robot_->describe(events.fault).c_str());
+    ROS_ERROR("%s: safe state: %s; reset, then /adroit/estop_release", name_, robot_->describe(events.fault).c_str());
     logged_.faults = counters.faults;
   }
   logged_.estops = counters.estops;  // e-stops are logged where they arrive (sim_services.cpp)
   publishSafeStateIfChanged();
 }
 
-void SimDriver::onDiagnostics(const ros::WallTimerEvent&) {
+void RobotDriver::onDiagnostics(const ros::WallTimerEvent&) {
   SafetyStatus safety;
   Counters counters;
   double clock, physics_time;
@@ -104,8 +104,8 @@ void SimDriver::onDiagnostics(const ros::WallTimerEvent&) {
   total_misses_ += window.deadline_misses;
   total_resyncs_ += window.resyncs;
 
-  rosutil::StatusBuilder s("adroit_sim", "simulation");
-  s.add("mode", modeName(params_.sim.mode));
+  rosutil::StatusBuilder s(name_, robot_->simulated() ? "simulation" : "hardware");
+  s.add("mode", modeName(robot_->mode()));
   s.add("time_mode", params_.realtime ? "realtime" : "lockstep");
   s.add("paused", paused);
   s.add("clock", clock);
@@ -131,7 +131,7 @@ void SimDriver::onDiagnostics(const ros::WallTimerEvent&) {
   s.add("estop_input_changes", estop_input_changes_.load());
   s.add("watchdog_armed", safety.watchdog_armed);
   s.add("watchdog_latched", safety.watchdog_latched);
-  s.add("watchdog_timeout", params_.sim.watchdog_timeout);
+  s.add("watchdog_timeout", robot_->watchdogTimeout());
   s.add("never_commanded", never_commanded);
   s.add("never_commanded_names", never_commanded_names);
   s.add("fault_latched", safety.fault_latched);

@@ -1,6 +1,7 @@
-// The simulation thread: steps the robot, paced at real time (states due at origin + k dt,
-// wall) or in lockstep (as fast as possible, or a requested number of steps while paused),
-// and queues each step's outputs for the publisher thread. After start-up it allocates
+// The robot thread: steps the robot, paced at real time (states due at origin + k dt, wall)
+// or in lockstep (as fast as possible, or a requested number of steps while paused), or, for
+// a robot driven by its input (the hardware), as soon as input arrives; and queues each
+// step's outputs for the publisher thread. After start-up it allocates
 // nothing and logs nothing; the only lock it can meet held by another thread is
 // robot_mutex_ (priority inheritance), whose other holders copy a few numbers.
 #include <sys/resource.h>
@@ -12,7 +13,7 @@
 #include <cstring>
 
 #include "adroit_core/scheduling.h"
-#include "sim_driver.h"
+#include "robot_driver.h"
 
 namespace adroit::driver {
 
@@ -20,42 +21,42 @@ namespace {
 using SteadyClock = std::chrono::steady_clock;
 }  // namespace
 
-bool SimDriver::enterRealtimeScheduling() {
+bool RobotDriver::enterRealtimeScheduling() {
   std::string error;
   if (!enterFifo(params_.realtime_priority, &error)) {
-    ROS_WARN("adroit_sim: ~realtime_priority %d: SCHED_FIFO not permitted (%s); stepping with normal scheduling "
-             "(grant an rtprio limit or CAP_SYS_NICE, or set ~realtime_priority: 0)",
+    ROS_WARN("%s: ~realtime_priority %d: SCHED_FIFO not permitted (%s); stepping with normal scheduling "
+             "(grant an rtprio limit or CAP_SYS_NICE, or set ~realtime_priority: 0)", name_,
              params_.realtime_priority, error.c_str());
     return false;
   }
   fifo_priority_ = params_.realtime_priority;
-  ROS_INFO("adroit_sim: simulation thread under SCHED_FIFO, priority %d", params_.realtime_priority);
+  ROS_INFO("%s: simulation thread under SCHED_FIFO, priority %d", name_, params_.realtime_priority);
   return true;
 }
 
-void SimDriver::leaveRealtimeScheduling(const char* why) {
+void RobotDriver::leaveRealtimeScheduling(const char* why) {
   leaveFifo();
   fifo_priority_ = 0;
-  ROS_WARN("adroit_sim: leaving SCHED_FIFO: %s", why);
+  ROS_WARN("%s: leaving SCHED_FIFO: %s", name_, why);
 }
 
-void SimDriver::raiseLockstepWeight() {
+void RobotDriver::raiseLockstepWeight() {
   if (params_.lockstep_nice == 0) return;
   if (std::thread::hardware_concurrency() < 2) {
-    ROS_WARN("adroit_sim: one CPU: ~lockstep_nice not applied, so that the other nodes keep a share of it");
+    ROS_WARN("%s: one CPU: ~lockstep_nice not applied, so that the other nodes keep a share of it", name_);
     return;
   }
   // Linux: a thread id as PRIO_PROCESS sets the nice value of that thread alone.
   if (setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), params_.lockstep_nice) != 0) {
-    ROS_WARN("adroit_sim: ~lockstep_nice %d not permitted (%s); stepping at the default weight "
-             "(grant a nice limit or CAP_SYS_NICE, or set ~lockstep_nice: 0)",
+    ROS_WARN("%s: ~lockstep_nice %d not permitted (%s); stepping at the default weight "
+             "(grant a nice limit or CAP_SYS_NICE, or set ~lockstep_nice: 0)", name_,
              params_.lockstep_nice, std::strerror(errno));
     return;
   }
   thread_nice_ = params_.lockstep_nice;
 }
 
-void SimDriver::recordStepTiming(double step_seconds, double lateness) {
+void RobotDriver::recordStepTiming(double step_seconds, double lateness) {
   // try_lock: diagnostics only swap two objects under this lock, but the simulation thread
   // must never wait for them. Adding stays within the reserved capacity.
   std::unique_lock<std::mutex> lock(stats_mutex_, std::try_to_lock);
@@ -67,7 +68,7 @@ void SimDriver::recordStepTiming(double step_seconds, double lateness) {
   if (lateness >= 0) timing_.lateness.add(lateness);
 }
 
-void SimDriver::runPendingRequest() {
+void RobotDriver::runPendingRequest() {
   // A reset or teleport, handed over by a service thread (changeState). It runs here,
   // between two steps, so that no service ever holds the robot while this loop waits.
   std::unique_lock<std::mutex> control(control_mutex_);
@@ -95,8 +96,8 @@ void SimDriver::runPendingRequest() {
   control_cv_.notify_all();
 }
 
-void SimDriver::loop() {
-  const double dt = params_.sim.timestep;
+void RobotDriver::loop() {
+  const double dt = robot_->timestep();
   // Real time: state k is published at origin + k dt (wall); computing it happens before.
   auto origin = SteadyClock::now();
   double origin_clock = 0;
@@ -195,6 +196,37 @@ void SimDriver::loop() {
       std::lock_guard<std::mutex> lock(control_mutex_);
       if (pending_steps_ > 0 && --pending_steps_ == 0) control_cv_.notify_all();
     }
+  }
+}
+
+// The hardware: the robot thread waits on the buses (not holding the robot) and steps as
+// soon as frames arrive, so a sensor sample is published without waiting for a tick; it also
+// steps at least every timestep, so the watchdogs run while the buses are silent.
+void RobotDriver::inputLoop() {
+  const auto dt = std::chrono::duration_cast<SteadyClock::duration>(std::chrono::duration<double>(robot_->timestep()));
+  sim_thread_id_ = syscall(SYS_gettid);
+  if (params_.realtime_priority > 0) enterRealtimeScheduling();  // it sleeps in ppoll: FIFO is safe
+  auto next_tick = SteadyClock::now() + dt;
+  while (running_) {
+    const auto now = SteadyClock::now();
+    if (now < next_tick) robot_->waitForInput(std::chrono::duration<double>(next_tick - now).count());
+    const auto compute_start = SteadyClock::now();
+    if (compute_start >= next_tick) {
+      next_tick += dt;
+      if (next_tick < compute_start) next_tick = compute_start + dt;  // far behind: no burst of ticks
+    }
+    runPendingRequest();  // a reset or teleport request: the robot refuses it, but answers
+    unsigned fresh;
+    {
+      std::lock_guard<PiMutex> lock(robot_mutex_);
+      robot_->step();
+      fresh = robot_->takeFresh();
+      fresh_ |= fresh;
+      steps_done_.store(robot_->counters().steps, std::memory_order_relaxed);
+    }
+    const double step_seconds = std::chrono::duration<double>(SteadyClock::now() - compute_start).count();
+    if (fresh != 0 || latency_due_) publishDue(false, wallSeconds(), true);
+    recordStepTiming(step_seconds, -1);
   }
 }
 

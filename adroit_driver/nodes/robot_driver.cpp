@@ -1,6 +1,5 @@
-// Set-up of the simulation driver: the robot from the parameters, the topics and services on
-// their callback queues, and the threads.
-#include "sim_driver.h"
+// Set-up of the driver: the topics and services on their callback queues, and the threads.
+#include "robot_driver.h"
 
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <rosgraph_msgs/Clock.h>
@@ -9,22 +8,24 @@
 
 namespace adroit::driver {
 
-SimDriver::SimDriver(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh), io_(nh, "adroit") {
-  params_ = readParams(pnh);
-  const double dt = params_.sim.timestep;
-  joint_every_ = stepsPerPublication("joint_state_rate", params_.joint_state_rate, dt);
-  actuator_every_ = stepsPerPublication("actuator_state_rate", params_.actuator_state_rate, dt);
-  touch_every_ = stepsPerPublication("touch_rate", params_.touch_rate, dt);
-  object_every_ = stepsPerPublication("object_rate", params_.object_rate, dt);
-  try {
-    robot_ = std::make_unique<SimulatedRobot>(params_.sim);
-  } catch (const std::invalid_argument& e) {
-    throw ParameterError(std::string("bad parameter ") + e.what());
-  } catch (const std::runtime_error& e) {  // ModelLoadError and cylinder table errors
-    throw ParameterError(std::string("bad parameter ~scene/~model_file: ") + e.what());
+RobotDriver::RobotDriver(ros::NodeHandle nh, DriverParams params, std::unique_ptr<Robot> robot, std::string name)
+    : params_(std::move(params)),
+      robot_(std::move(robot)),
+      name_str_(std::move(name)),
+      name_(name_str_.c_str()),
+      nh_(nh),
+      io_(nh, "adroit") {
+  const double dt = robot_->timestep();
+  // An input-driven robot publishes each sample when it arrives: the rates do not apply.
+  if (!robot_->drivenByInput()) {
+    joint_every_ = stepsPerPublication("joint_state_rate", params_.joint_state_rate, dt);
+    actuator_every_ = stepsPerPublication("actuator_state_rate", params_.actuator_state_rate, dt);
+    touch_every_ = stepsPerPublication("touch_rate", params_.touch_rate, dt);
+    object_every_ = stepsPerPublication("object_rate", params_.object_rate, dt);
   }
   paused_ = params_.start_paused;
-  wall_offset_ = ros::WallTime::now().toSec();
+  // Stamps are wall_offset_ + clock(): the robot's clock may have started before this wrapper.
+  wall_offset_ = ros::WallTime::now().toSec() - (robot_->drivenByInput() ? robot_->clock() : 0.0);
   released_wall_ = wall_offset_;
 
   // Everything the threads reuse is sized here, once.
@@ -56,7 +57,7 @@ SimDriver::SimDriver(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh), io_(nh,
   marker_pub_ = io_.advertise<visualization_msgs::MarkerArray>("markers", 2);
   latency_pub_ = io_.advertise<adroit_msgs::CommandLatency>("command_latency", 50);
   if (robot_->hasFreeBase())  // teleop scenes: a motion-capture stream moves the hand's base
-    base_sub_ = io_.subscribe("hand_base/target", 10, &SimDriver::onBaseTarget, this,
+    base_sub_ = io_.subscribe("hand_base/target", 10, &RobotDriver::onBaseTarget, this,
                               ros::TransportHints().tcpNoDelay());
   if (params_.use_sim_time) clock_pub_ = nh_.advertise<rosgraph_msgs::Clock>("/clock", 10);
   tf_ = std::make_unique<tf2_ros::TransformBroadcaster>();
@@ -65,52 +66,52 @@ SimDriver::SimDriver(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh), io_(nh,
   safety_io_ = ros::NodeHandle(nh_, "adroit");
   safety_io_.setCallbackQueue(&safety_queue_);
   const auto hints = ros::TransportHints().tcpNoDelay();
-  valve_sub_ = safety_io_.subscribe("valve_command", 10, &SimDriver::onValveCommand, this, hints);
-  force_sub_ = safety_io_.subscribe("tendon_force_command", 10, &SimDriver::onForceCommand, this, hints);
-  estop_input_sub_ = safety_io_.subscribe("estop_input", 10, &SimDriver::onEstopInput, this, hints);
-  services_.push_back(safety_io_.advertiseService("estop", &SimDriver::onEstop, this));
-  services_.push_back(safety_io_.advertiseService("estop_release", &SimDriver::onRelease, this));
-  services_.push_back(safety_io_.advertiseService("pause", &SimDriver::onPause, this));
-  monitor_timer_ = safety_io_.createWallTimer(ros::WallDuration(0.05), &SimDriver::onSafetyMonitor, this);
+  valve_sub_ = safety_io_.subscribe("valve_command", 10, &RobotDriver::onValveCommand, this, hints);
+  force_sub_ = safety_io_.subscribe("tendon_force_command", 10, &RobotDriver::onForceCommand, this, hints);
+  estop_input_sub_ = safety_io_.subscribe("estop_input", 10, &RobotDriver::onEstopInput, this, hints);
+  services_.push_back(safety_io_.advertiseService("estop", &RobotDriver::onEstop, this));
+  services_.push_back(safety_io_.advertiseService("estop_release", &RobotDriver::onRelease, this));
+  services_.push_back(safety_io_.advertiseService("pause", &RobotDriver::onPause, this));
+  services_.push_back(safety_io_.advertiseService("recover", &RobotDriver::onRecover, this));
+  monitor_timer_ = safety_io_.createWallTimer(ros::WallDuration(0.05), &RobotDriver::onSafetyMonitor, this);
   // The rest on the caller's queue (the node spins it with two threads, so a long /step
   // does not hold up diagnostics).
-  services_.push_back(io_.advertiseService("reset", &SimDriver::onReset, this));
-  services_.push_back(io_.advertiseService("set_object_pose", &SimDriver::onSetObjectPose, this));
-  services_.push_back(io_.advertiseService("step", &SimDriver::onStep, this));
-  diag_timer_ = nh_.createWallTimer(ros::WallDuration(params_.diagnostics_period), &SimDriver::onDiagnostics, this);
+  services_.push_back(io_.advertiseService("reset", &RobotDriver::onReset, this));
+  services_.push_back(io_.advertiseService("set_object_pose", &RobotDriver::onSetObjectPose, this));
+  services_.push_back(io_.advertiseService("step", &RobotDriver::onStep, this));
+  diag_timer_ = nh_.createWallTimer(ros::WallDuration(params_.diagnostics_period), &RobotDriver::onDiagnostics, this);
   publishSafeStateIfChanged();
 
-  ROS_INFO("adroit_sim: %s, %s mode, %zu cylinders, %zu joints, dt %.4f s, %s%s, sensor realism %s (seed %lu)",
-           params_.sim.model_path.c_str(), modeName(params_.sim.mode), robot_->cylinders().size(),
-           robot_->jointNames().size(), dt, params_.realtime ? "real time" : "lockstep",
-           params_.use_sim_time ? " with /clock" : "", params_.sim.sensors.enabled ? "on" : "off",
-           static_cast<unsigned long>(params_.sim.sensors.seed));
+  ROS_INFO("%s: %s, %s mode, %zu cylinders, %zu joints, dt %.4f s, %s%s", name_, robot_->modelPath().c_str(),
+           modeName(robot_->mode()), robot_->cylinders().size(), robot_->jointNames().size(), dt,
+           robot_->drivenByInput() ? "driven by its input" : (params_.realtime ? "real time" : "lockstep"),
+           params_.use_sim_time ? " with /clock" : "");
 }
 
-SimDriver::~SimDriver() { stop(); }
+RobotDriver::~RobotDriver() { stop(); }
 
-void SimDriver::start() {
+void RobotDriver::start() {
   if (running_.exchange(true)) return;
   {
     std::lock_guard<std::mutex> lock(publish_mutex_);
     publisher_running_ = true;
   }
-  publisher_ = std::thread(&SimDriver::publishLoop, this);
-  thread_ = std::thread(&SimDriver::loop, this);
+  publisher_ = std::thread(&RobotDriver::publishLoop, this);
+  thread_ = std::thread(robot_->drivenByInput() ? &RobotDriver::inputLoop : &RobotDriver::loop, this);
   safety_running_ = true;
-  safety_thread_ = std::thread(&SimDriver::safetyLoop, this);
+  safety_thread_ = std::thread(&RobotDriver::safetyLoop, this);
 }
 
 // The safety queue's one thread: e-stop, release, pause and every command. Real time: under
 // SCHED_FIFO just below the publisher, so a busy machine cannot hold commands back until the
 // watchdog trips (it sleeps while the queue is empty).
-void SimDriver::safetyLoop() {
+void RobotDriver::safetyLoop() {
   if (params_.realtime && params_.realtime_priority > 2 && enterFifo(params_.realtime_priority - 2, nullptr))
     safety_fifo_priority_ = params_.realtime_priority - 2;
   while (safety_running_.load()) safety_queue_.callAvailable(ros::WallDuration(0.02));
 }
 
-void SimDriver::stop() {
+void RobotDriver::stop() {
   if (!running_.exchange(false)) return;
   control_cv_.notify_all();
   published_cv_.notify_all();  // a simulation thread waiting for queue space must see the stop
@@ -125,13 +126,13 @@ void SimDriver::stop() {
   if (safety_thread_.joinable()) safety_thread_.join();
 }
 
-ros::Time SimDriver::stamp() const {
+ros::Time RobotDriver::stamp() const {
   // Sim time: the driver's monotonic clock is the ROS clock. Wall time: the wall time the
   // real-time schedule assigns to this state (regular, unlike the publication instant).
   return params_.use_sim_time ? ros::Time(robot_->clock()) : ros::Time(wall_offset_ + robot_->clock());
 }
 
-std::vector<double> SimDriver::takeJointIntervals() {
+std::vector<double> RobotDriver::takeJointIntervals() {
   std::lock_guard<std::mutex> lock(intervals_mutex_);
   std::vector<double> out;
   out.swap(joint_intervals_);

@@ -8,11 +8,11 @@
 #include <rosgraph_msgs/Clock.h>
 
 #include "adroit_core/scheduling.h"
-#include "sim_driver.h"
+#include "robot_driver.h"
 
 namespace adroit::driver {
 
-void SimDriver::publishDue(bool all, double wall_now, bool flush) {
+void RobotDriver::publishDue(bool all, double wall_now, bool flush) {
   std::uint64_t slot_index;
   {
     std::unique_lock<std::mutex> lock(publish_mutex_);
@@ -32,11 +32,21 @@ void SimDriver::publishDue(bool all, double wall_now, bool flush) {
     if (!finite) nonfinite_suppressed_.fetch_add(1, std::memory_order_relaxed);
     batch.all = all;
     batch.clock = params_.use_sim_time && !all;
-    batch.joints = finite && (all || k % joint_every_ == 0);
-    batch.actuators = finite && (all || k % actuator_every_ == 0);
-    batch.touch = finite && (all || k % touch_every_ == 0);
-    batch.object = finite && robot_->hasObject() && (all || k % object_every_ == 0);
-    batch.base = finite && robot_->hasFreeBase() && (all || k % object_every_ == 0);
+    if (robot_->drivenByInput()) {  // each output when a new sample of it is in
+      const unsigned due = all ? ~0u : fresh_;
+      fresh_ = 0;
+      batch.joints = finite && (due & Robot::kJoints);
+      batch.actuators = finite && (due & Robot::kActuators);
+      batch.touch = finite && (due & Robot::kTouch);
+      batch.object = finite && robot_->hasObject() && (due & Robot::kObject);
+      batch.base = false;
+    } else {
+      batch.joints = finite && (all || k % joint_every_ == 0);
+      batch.actuators = finite && (all || k % actuator_every_ == 0);
+      batch.touch = finite && (all || k % touch_every_ == 0);
+      batch.object = finite && robot_->hasObject() && (all || k % object_every_ == 0);
+      batch.base = finite && robot_->hasFreeBase() && (all || k % object_every_ == 0);
+    }
     batch.latency = latency_due_ && !all;
     if (batch.latency) {
       batch.command_stamp = latency_stamp_;
@@ -67,7 +77,7 @@ void SimDriver::publishDue(bool all, double wall_now, bool flush) {
   if (wake) work_cv_.notify_one();
 }
 
-void SimDriver::flushPublication() {
+void RobotDriver::flushPublication() {
   bool wake;
   {
     std::lock_guard<std::mutex> lock(publish_mutex_);
@@ -76,18 +86,18 @@ void SimDriver::flushPublication() {
   if (wake) work_cv_.notify_one();
 }
 
-std::uint64_t SimDriver::queuedBatches() {
+std::uint64_t RobotDriver::queuedBatches() {
   std::lock_guard<std::mutex> lock(publish_mutex_);
   return queued_batches_;
 }
 
-void SimDriver::waitForPublication(std::uint64_t batches) {
+void RobotDriver::waitForPublication(std::uint64_t batches) {
   // Bounded wait: a stopping driver must not hang the service thread.
   std::unique_lock<std::mutex> lock(publish_mutex_);
   published_cv_.wait_for(lock, std::chrono::seconds(2), [&] { return published_batches_ >= batches || !running_; });
 }
 
-void SimDriver::publishLoop() {
+void RobotDriver::publishLoop() {
   // Real time: the states leave at their deadlines only if this thread runs when woken, so
   // it runs under SCHED_FIFO just below the simulation thread (it sleeps between states;
   // the simulation thread's start-up says whether SCHED_FIFO is permitted at all).
@@ -115,7 +125,7 @@ void SimDriver::publishLoop() {
   }
 }
 
-void SimDriver::publishQueued() {
+void RobotDriver::publishQueued() {
   std::uint64_t first, end;
   {
     std::lock_guard<std::mutex> lock(publish_mutex_);
@@ -140,7 +150,7 @@ void SimDriver::publishQueued() {
   published_cv_.notify_all();  // room for the simulation thread; services waiting for a republish
 }
 
-void SimDriver::publishClock(double sim_clock) {
+void RobotDriver::publishClock(double sim_clock) {
   // By shared pointer: this node's own /clock subscription (roscpp subscribes every node to
   // /clock under /use_sim_time) then gets the message directly, without a serialisation.
   auto clock = boost::make_shared<rosgraph_msgs::Clock>();
@@ -148,7 +158,7 @@ void SimDriver::publishClock(double sim_clock) {
   clock_pub_.publish(clock);
 }
 
-void SimDriver::publishBatch(const Batch& batch) {
+void RobotDriver::publishBatch(const Batch& batch) {
   fillMessages(batch);
   if (batch.joints) {
     joint_pub_.publish(joint_msg_);
@@ -170,7 +180,7 @@ void SimDriver::publishBatch(const Batch& batch) {
   if (batch.markers) publishMarkers();
 }
 
-void SimDriver::fillMessages(const Batch& batch) {
+void RobotDriver::fillMessages(const Batch& batch) {
   const Signals& s = batch.signals;
   if (batch.joints) {
     joint_msg_.header.stamp = batch.stamp;

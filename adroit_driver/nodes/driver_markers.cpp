@@ -2,7 +2,7 @@
 // cylinder for its gauge pressure, touch contacts and the free object.
 #include <cmath>
 
-#include "sim_driver.h"
+#include "robot_driver.h"
 
 namespace adroit::driver {
 
@@ -36,7 +36,7 @@ void setPose(visualization_msgs::Marker& marker, const double* pos, const double
 // Simulation thread, robot_mutex_ held: copies what the markers need into the preallocated
 // snapshot (mj_copyData into an existing mjData allocates nothing). try_lock: when the
 // publisher is still building from the last snapshot, this one is skipped.
-void SimDriver::takeMarkerSnapshot() {
+void RobotDriver::takeMarkerSnapshot() {
   std::unique_lock<std::mutex> lock(marker_mutex_, std::try_to_lock);
   if (!lock.owns_lock()) return;
   mj_copyData(marker_data_.get(), robot_->model(), robot_->data());
@@ -46,7 +46,7 @@ void SimDriver::takeMarkerSnapshot() {
 }
 
 // Publisher thread: builds the markers from the snapshot and sends them.
-void SimDriver::publishMarkers() {
+void RobotDriver::publishMarkers() {
   std::lock_guard<std::mutex> lock(marker_mutex_);
   if (!marker_fresh_) return;
   marker_fresh_ = false;
@@ -54,7 +54,7 @@ void SimDriver::publishMarkers() {
   const mjData* d = marker_data_.get();
   const Signals& truth = marker_truth_;
   const auto& cylinders = robot_->cylinders();
-  const double supply = params_.sim.supply_pressure, atm = robot_->atmosphericPressure();
+  const double supply = robot_->supplyPressure(), atm = robot_->atmosphericPressure();
   marker_msg_.markers.clear();
   visualization_msgs::Marker base;
   base.header.frame_id = "world";

@@ -1,19 +1,23 @@
-// ROS wrapper of SimulatedRobot, shared by the adroit_sim node and the SimNodelet. One file
-// per job:
-//   sim_params.cpp       ~parameters -> DriverParams (one-line errors naming the parameter)
-//   sim_driver.cpp       set-up: topics, services, the two callback queues, start/stop
-//   sim_loop.cpp         the simulation thread: pacing (real time / lockstep), scheduling
-//   sim_publication.cpp  the publication ring and the publisher thread (messages, /clock, tf)
-//   sim_services.cpp     commands, e-stop, pause, step, reset, set object pose
-//   sim_diagnostics.cpp  diagnostics, and each safety event logged once
-//   sim_markers.cpp      rviz markers built from a snapshot, off the simulation thread
+// The driver's ROS wrapper of a Robot (robot.h): one wrapper for the simulated robot (node
+// adroit_sim, SimNodelet) and the hardware over CAN (node adroit_hw), so the two present the
+// same topics, services and diagnostics by construction. One file per job:
+//   sim_params.cpp           ~parameters -> DriverParams + SimConfig, the simulation driver
+//   hardware_params.cpp      ~parameters -> DriverParams + CanRobotConfig, the hardware driver
+//   robot_driver.cpp         set-up: topics, services, the two callback queues, start/stop
+//   driver_loop.cpp          the robot thread: pacing (real time / lockstep / input-driven)
+//   driver_publication.cpp   the publication ring and the publisher thread (messages, /clock, tf)
+//   driver_services.cpp      commands, e-stop, pause, step, reset, set object pose, recover
+//   driver_diagnostics.cpp   diagnostics, and each safety event logged once
+//   driver_markers.cpp       rviz markers built from a snapshot, off the robot thread
 //
-// Threads. The simulation thread steps the robot and hands each step's outputs to the
+// Threads. The robot thread steps the robot and hands each step's outputs to the
 // publisher thread through a preallocated ring: after start-up it allocates nothing,
 // serialises nothing and logs nothing (test_sim_allocations proves it). The safety path
 // (e-stop service and input, release, pause, valve and force commands, the safety monitor)
 // has its own callback queue and spinner thread, so a long /step or /reset on the default
-// queue never delays it.
+// queue never delays it. A robot driven by its input (the hardware) is stepped as soon as
+// input arrives and at least every timestep, and each output is published when a new
+// sample of it is in.
 #pragma once
 
 #include <ros/callback_queue.h>
@@ -49,7 +53,7 @@
 #include "adroit_core/mujoco_model.h"
 #include "adroit_core/pi_mutex.h"
 #include "adroit_core/timing_stats.h"
-#include "adroit_driver/simulated_robot.h"
+#include "adroit_driver/robot.h"
 #include "adroit_ros/params.h"
 
 namespace adroit::driver {
@@ -61,9 +65,9 @@ inline double wallSeconds() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-// Everything the driver reads from its private parameters (see config/sim.yaml).
+// What the wrapper reads from its private parameters (config/sim.yaml, config/hardware.yaml);
+// the robot's own configuration is read by the node that builds it.
 struct DriverParams {
-  SimConfig sim;
   bool realtime = true;
   bool use_sim_time = false;
   bool start_paused = false;
@@ -83,8 +87,14 @@ struct DriverParams {
   int lockstep_nice = -20;
 };
 
-// Reads and validates ~parameters. Throws ParameterError (unknown scene, bad value...).
-DriverParams readParams(const ros::NodeHandle& pnh);
+// Reads and validates the wrapper's ~parameters. Throws ParameterError. `simulated` false
+// (hardware): real time only, no /clock, no start paused.
+DriverParams readDriverParams(const rosutil::Params& p, bool simulated);
+// The simulation's own ~parameters (scene, mode, timestep, sensors...). Throws ParameterError.
+SimConfig readSimConfig(const rosutil::Params& p);
+class RobotDriver;
+// The simulation driver from ~parameters (SimulatedRobot). Throws ParameterError.
+std::unique_ptr<RobotDriver> makeSimDriver(ros::NodeHandle nh, ros::NodeHandle pnh);
 
 // Publication every `steps` physics steps; the rate must divide the step rate so that the
 // published stream is regular (no 2-3-2-3 step beat). Throws ParameterError.
@@ -94,11 +104,12 @@ int stepsPerPublication(const std::string& name, double rate, double timestep);
 // larger requests are refused, and any request is cancelled by pause or e-stop.
 constexpr std::uint32_t kMaxStepsPerRequest = 500000;
 
-class SimDriver {
+class RobotDriver {
  public:
-  // Throws ParameterError or ModelLoadError with one line to report.
-  SimDriver(ros::NodeHandle nh, ros::NodeHandle pnh);
-  ~SimDriver();
+  // `name` prefixes the log lines and names the diagnostics status ("adroit_sim"). Throws
+  // ParameterError when the rates do not suit the robot's timestep.
+  RobotDriver(ros::NodeHandle nh, DriverParams params, std::unique_ptr<Robot> robot, std::string name);
+  ~RobotDriver();
 
   void start();  // starts the simulation, publisher and safety threads
   void stop();
@@ -132,8 +143,9 @@ class SimDriver {
     std::vector<double> command;
   };
 
-  // Sim thread.
+  // Robot thread.
   void loop();
+  void inputLoop();  // a robot driven by its input (hardware)
   bool enterRealtimeScheduling();
   void leaveRealtimeScheduling(const char* why);
   void raiseLockstepWeight();
@@ -166,6 +178,7 @@ class SimDriver {
   void onEstopInput(const std_msgs::Bool::ConstPtr& msg);
   void onBaseTarget(const geometry_msgs::PoseStamped::ConstPtr& msg);  // teleop scenes, default queue
   bool onPause(std_srvs::SetBool::Request& req, std_srvs::SetBool::Response& res);
+  bool onRecover(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool onEstop(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool onRelease(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   void reportCommand(const char* topic, const CommandResult& result);
@@ -185,7 +198,10 @@ class SimDriver {
   void publishSafeStateIfChanged();
 
   DriverParams params_;
-  std::unique_ptr<SimulatedRobot> robot_;
+  std::unique_ptr<Robot> robot_;
+  std::string name_str_;
+  const char* name_;  // name_str_.c_str(), for the log lines
+  unsigned fresh_ = 0;  // input-driven robot: outputs with a new sample (robot thread, under robot_mutex_)
   int joint_every_ = 1, actuator_every_ = 1, touch_every_ = 1, object_every_ = 1;
 
   ros::NodeHandle nh_, io_;

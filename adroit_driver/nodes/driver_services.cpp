@@ -3,7 +3,7 @@
 // default queue and never hold the robot while they wait.
 #include <chrono>
 
-#include "sim_driver.h"
+#include "robot_driver.h"
 
 namespace adroit::driver {
 
@@ -15,20 +15,20 @@ bool validCommand(const CommandResult& result) {
 }
 }  // namespace
 
-void SimDriver::reportCommand(const char* topic, const CommandResult& result) {
+void RobotDriver::reportCommand(const char* topic, const CommandResult& result) {
   if (result.applied) return;
   if (!validCommand(result)) {
-    ROS_ERROR_THROTTLE(1.0, "adroit_sim: %s rejected: %s", topic, result.error.c_str());
+    ROS_ERROR_THROTTLE(1.0, "%s: %s rejected: %s", name_, topic, result.error.c_str());
     return;
   }
   // A valid command while the safe state holds is expected (the senders keep running until
   // release; at shutdown their last commands land here): said once per safe-state episode.
   if (!warned_ignored_while_safe_.exchange(true))
-    ROS_WARN("adroit_sim: %s and further commands ignored until /adroit/estop_release: %s", topic,
+    ROS_WARN("%s: %s and further commands ignored until /adroit/estop_release: %s", name_, topic,
              result.error.c_str());
 }
 
-void SimDriver::onValveCommand(const adroit_msgs::ValveCommand::ConstPtr& msg) {
+void RobotDriver::onValveCommand(const adroit_msgs::ValveCommand::ConstPtr& msg) {
   // Addressing and values are checked before the robot is locked; under the lock only the
   // checked values are copied in.
   const CheckedCommand checked = robot_->checkValves(msg->name, msg->index, msg->volts);
@@ -36,12 +36,18 @@ void SimDriver::onValveCommand(const adroit_msgs::ValveCommand::ConstPtr& msg) {
   {
     std::lock_guard<PiMutex> lock(robot_mutex_);
     result = robot_->applyValves(checked);
+    // The hardware sends the valve frames from applyValves: the command acts now.
+    if (result.applied && robot_->drivenByInput() && msg->header.stamp > applied_command_stamp_) {
+      applied_command_stamp_ = latency_stamp_ = msg->header.stamp;
+      latency_applied_ = ros::Time(ros::WallTime::now().toSec());
+      latency_due_ = true;
+    }
   }
   reportCommand("valve_command", result);
   if (validCommand(result)) noteCommandStamp(msg->header.stamp);
 }
 
-void SimDriver::onForceCommand(const adroit_msgs::TendonForceCommand::ConstPtr& msg) {
+void RobotDriver::onForceCommand(const adroit_msgs::TendonForceCommand::ConstPtr& msg) {
   const CheckedCommand checked = robot_->checkForces(msg->name, msg->index, msg->force);
   CommandResult result;
   {
@@ -52,7 +58,7 @@ void SimDriver::onForceCommand(const adroit_msgs::TendonForceCommand::ConstPtr& 
   if (validCommand(result)) noteCommandStamp(msg->header.stamp);
 }
 
-void SimDriver::onBaseTarget(const geometry_msgs::PoseStamped::ConstPtr& msg) {
+void RobotDriver::onBaseTarget(const geometry_msgs::PoseStamped::ConstPtr& msg) {
   std::string error;
   bool ok = msg->header.frame_id.empty() || msg->header.frame_id == "world";
   if (!ok) {
@@ -68,17 +74,17 @@ void SimDriver::onBaseTarget(const geometry_msgs::PoseStamped::ConstPtr& msg) {
     return;
   }
   ++base_targets_rejected_;
-  ROS_ERROR_THROTTLE(1.0, "adroit_sim: hand_base/target rejected: %s", error.c_str());
+  ROS_ERROR_THROTTLE(1.0, "%s: hand_base/target rejected: %s", name_, error.c_str());
 }
 
-void SimDriver::noteCommandStamp(const ros::Time& stamp) {
+void RobotDriver::noteCommandStamp(const ros::Time& stamp) {
   std::lock_guard<std::mutex> lock(control_mutex_);
   if (stamp <= last_command_stamp_) return;
   last_command_stamp_ = stamp;
   control_cv_.notify_all();
 }
 
-void SimDriver::cancelSteps(const char* why) {
+void RobotDriver::cancelSteps(const char* why) {
   std::lock_guard<std::mutex> lock(control_mutex_);
   if (pending_steps_ == 0) return;
   pending_steps_ = 0;
@@ -87,7 +93,7 @@ void SimDriver::cancelSteps(const char* why) {
   control_cv_.notify_all();
 }
 
-void SimDriver::onEstopInput(const std_msgs::Bool::ConstPtr& msg) {
+void RobotDriver::onEstopInput(const std_msgs::Bool::ConstPtr& msg) {
   bool pressed;
   {
     std::lock_guard<PiMutex> lock(robot_mutex_);
@@ -99,13 +105,13 @@ void SimDriver::onEstopInput(const std_msgs::Bool::ConstPtr& msg) {
   }
   if (pressed) {
     // A bouncing contact toggles at kHz: one line a second, with the count.
-    ROS_WARN_THROTTLE(1.0, "adroit_sim: e-stop input held: safe state (%lu input changes so far)",
+    ROS_WARN_THROTTLE(1.0, "%s: e-stop input held: safe state (%lu input changes so far)", name_,
                       static_cast<unsigned long>(estop_input_changes_.load()));
   }
   publishSafeStateIfChanged();
 }
 
-bool SimDriver::onEstop(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
+bool RobotDriver::onEstop(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
   double clock;
   {
     std::lock_guard<PiMutex> lock(robot_mutex_);
@@ -115,14 +121,15 @@ bool SimDriver::onEstop(std_srvs::Trigger::Request&, std_srvs::Trigger::Response
     robot_->estop();
     clock = robot_->clock();
   }
-  ROS_WARN_THROTTLE(1.0, "adroit_sim: e-stop: supply exhausted, every valve open to exhaust (latched)");
+  ROS_WARN_THROTTLE(1.0, "%s: e-stop: supply exhausted, every valve open to exhaust (latched)", name_);
   publishSafeStateIfChanged();
   res.success = true;
-  res.message = "e-stop latched at simulated time " + std::to_string(clock) + " s";
+  res.message = std::string("e-stop latched at ") + (robot_->simulated() ? "simulated time " : "robot clock ") +
+                std::to_string(clock) + " s";
   return true;
 }
 
-bool SimDriver::onRelease(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
+bool RobotDriver::onRelease(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
   {
     std::lock_guard<PiMutex> lock(robot_mutex_);
     res.success = robot_->release(&res.message);
@@ -130,15 +137,30 @@ bool SimDriver::onRelease(std_srvs::Trigger::Request&, std_srvs::Trigger::Respon
   if (res.success) {
     warned_ignored_while_safe_ = false;
     released_wall_ = wallSeconds();
-    ROS_INFO("adroit_sim: safe state %s", res.message.c_str());
+    ROS_INFO("%s: safe state %s", name_, res.message.c_str());
   } else {
-    ROS_WARN("adroit_sim: release %s", res.message.c_str());
+    ROS_WARN("%s: release %s", name_, res.message.c_str());
   }
   publishSafeStateIfChanged();
   return true;
 }
 
-bool SimDriver::onPause(std_srvs::SetBool::Request& req, std_srvs::SetBool::Response& res) {
+bool RobotDriver::onRecover(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
+  {
+    std::lock_guard<PiMutex> lock(robot_mutex_);
+    res.success = robot_->recover(&res.message);
+  }
+  if (res.success) ROS_INFO("%s: recover: %s", name_, res.message.c_str());
+  else ROS_WARN("%s: recover failed: %s", name_, res.message.c_str());
+  return true;
+}
+
+bool RobotDriver::onPause(std_srvs::SetBool::Request& req, std_srvs::SetBool::Response& res) {
+  if (!robot_->simulated()) {  // a real robot cannot stop time: it always runs
+    res.success = !req.data;
+    res.message = req.data ? "a real robot cannot be paused (use /adroit/estop to stop it)" : "running";
+    return true;
+  }
   std::lock_guard<std::mutex> lock(control_mutex_);
   paused_ = req.data;
   if (pending_steps_ > 0) {  // a running /step ends here, unsuccessful
@@ -154,9 +176,12 @@ bool SimDriver::onPause(std_srvs::SetBool::Request& req, std_srvs::SetBool::Resp
 
 // ---------------------------------------------------------------------------- services (default queue)
 
-bool SimDriver::onStep(adroit_msgs::Step::Request& req, adroit_msgs::Step::Response& res) {
+bool RobotDriver::onStep(adroit_msgs::Step::Request& req, adroit_msgs::Step::Response& res) {
   std::unique_lock<std::mutex> lock(control_mutex_);
-  if (!paused_) {
+  if (!robot_->simulated()) {
+    res.success = false;
+    res.message = "step exists only in simulation: this robot is real and runs on wall time";
+  } else if (!paused_) {
     res.success = false;
     res.message = "the simulation is running; pause it (/adroit/pause) before stepping";
   } else if (req.steps > kMaxStepsPerRequest) {
@@ -181,7 +206,7 @@ bool SimDriver::onStep(adroit_msgs::Step::Request& req, adroit_msgs::Step::Respo
     control_cv_.notify_all();
     // The wait ends when the steps are done, cancelled (pause, e-stop) or the driver stops;
     // the budget (100x slower than real time) only guards against a stalled simulation.
-    const double budget = 10.0 + req.steps * params_.sim.timestep * 100.0;
+    const double budget = 10.0 + req.steps * robot_->timestep() * 100.0;
     const bool ended = control_cv_.wait_for(lock, std::chrono::duration<double>(budget), [&] {
       return pending_steps_ == 0 || !running_ || step_cancellations_ != cancellations;
     });
@@ -203,7 +228,7 @@ bool SimDriver::onStep(adroit_msgs::Step::Request& req, adroit_msgs::Step::Respo
   return true;
 }
 
-bool SimDriver::changeState(const std::function<bool(std::string*)>& change, std::string* error) {
+bool RobotDriver::changeState(const std::function<bool(std::string*)>& change, std::string* error) {
   std::unique_lock<std::mutex> lock(control_mutex_);
   control_cv_.wait(lock, [this] { return !pending_change_ || !running_; });  // one change at a time
   if (!running_) return *error = "the driver is stopping", false;
@@ -225,7 +250,7 @@ bool SimDriver::changeState(const std::function<bool(std::string*)>& change, std
   return ok;
 }
 
-bool SimDriver::onReset(adroit_msgs::Reset::Request& req, adroit_msgs::Reset::Response& res) {
+bool RobotDriver::onReset(adroit_msgs::Reset::Request& req, adroit_msgs::Reset::Response& res) {
   const bool arrays = !req.qpos.empty() || !req.qvel.empty() || !req.pressure.empty();
   if (!req.keyframe.empty() && arrays) {
     res.success = false;
@@ -240,11 +265,11 @@ bool SimDriver::onReset(adroit_msgs::Reset::Request& req, adroit_msgs::Reset::Re
       },
       &error);
   res.message = res.success ? "reset" : error;
-  if (!res.success) ROS_WARN("adroit_sim: reset refused: %s", error.c_str());
+  if (!res.success) ROS_WARN("%s: reset refused: %s", name_, error.c_str());
   return true;
 }
 
-bool SimDriver::onSetObjectPose(adroit_msgs::SetObjectPose::Request& req, adroit_msgs::SetObjectPose::Response& res) {
+bool RobotDriver::onSetObjectPose(adroit_msgs::SetObjectPose::Request& req, adroit_msgs::SetObjectPose::Response& res) {
   const auto& p = req.pose.position;
   const auto& q = req.pose.orientation;
   const auto& l = req.twist.linear;
@@ -256,7 +281,7 @@ bool SimDriver::onSetObjectPose(adroit_msgs::SetObjectPose::Request& req, adroit
       },
       &error);
   res.message = res.success ? "object placed" : error;
-  if (!res.success) ROS_WARN("adroit_sim: set_object_pose refused: %s", error.c_str());
+  if (!res.success) ROS_WARN("%s: set_object_pose refused: %s", name_, error.c_str());
   return true;
 }
 

@@ -4,9 +4,12 @@ driver running in real time lower the cost; between rollouts and after the job t
 command watchdog never trips (keep-alive, then parked), so execute_policy runs next."""
 import math
 import os
+import subprocess
+import sys
 import tempfile
 import time
 import unittest
+import xml.etree.ElementTree as ET
 
 import rospy
 import rostest
@@ -18,7 +21,33 @@ ROLLOUTS, HORIZON_S = 5, 50 * 0.04  # position_with_gravity: T = 50 steps of 40 
 ITERATIONS = 6  # the cost falls clearly within 6 (the first 3 vary by seed and timing)
 
 
+def realtime_scheduling_permitted():
+    """Whether this machine grants SCHED_FIFO, as the driver's threads and the trainer's
+    keep-alive ask for. Without it their 50 ms command watchdog chain runs at normal priority,
+    and a loaded machine trips it (seen here with two CPU hogs: a trip in iteration 5), which
+    both nodes say in a warning at start-up; real-time pacing is then not something to test."""
+    return subprocess.run(["chrt", "-f", "1", "true"], stdout=subprocess.DEVNULL,
+                          stderr=subprocess.DEVNULL).returncode == 0
+
+
+NO_REALTIME = "SCHED_FIFO is not permitted on this machine (grant an rtprio limit or CAP_SYS_NICE): " \
+              "real-time pacing needs it"
+
+
+def mark_results_skipped(reason):
+    """rosunit writes a skipped case as passed; the workspace's count (scripts/count_results.py)
+    reads this result file, so the skip is written into it."""
+    for arg in sys.argv:
+        if arg.startswith("--gtest_output=xml:"):
+            path = arg[len("--gtest_output=xml:"):]
+            tree = ET.parse(path)
+            for case in tree.getroot().iter("testcase"):
+                ET.SubElement(case, "skipped", message=reason)
+            tree.write(path)
+
+
 class TrainInRealTime(unittest.TestCase):
+    @unittest.skipUnless(realtime_scheduling_permitted(), NO_REALTIME)
     def test_trains_at_the_control_rate_and_leaves_the_driver_usable(self):
         for name in ("train", "status", "execute_policy"):
             rospy.wait_for_service("/adroit_learning/" + name, timeout=60)
@@ -66,3 +95,5 @@ class TrainInRealTime(unittest.TestCase):
 if __name__ == "__main__":
     rospy.init_node("test_train_realtime")
     rostest.rosrun("adroit_launch", "train_in_real_time", TrainInRealTime)
+    if not realtime_scheduling_permitted():
+        mark_results_skipped(NO_REALTIME)

@@ -61,6 +61,7 @@ void RobotDriver::onDiagnostics(const ros::WallTimerEvent&) {
   double clock, physics_time;
   std::size_t never_commanded;
   std::string never_commanded_names;
+  DiagnosticValues robot_values;
   {
     std::lock_guard<PiMutex> lock(robot_mutex_);
     safety = robot_->safety();
@@ -69,6 +70,7 @@ void RobotDriver::onDiagnostics(const ros::WallTimerEvent&) {
     physics_time = robot_->data()->time;
     never_commanded = robot_->neverCommanded();
     for (std::size_t i = 0; i < commanded_snapshot_.size(); ++i) commanded_snapshot_[i] = robot_->everCommanded(i);
+    robot_->addDiagnostics(&robot_values);  // the hardware's buses and boards (live state: under the lock)
   }
   if (never_commanded > 0) {  // names from the model (constant), built outside the lock
     const auto& names = robot_->cylinderNames();
@@ -106,7 +108,7 @@ void RobotDriver::onDiagnostics(const ros::WallTimerEvent&) {
 
   rosutil::StatusBuilder s(name_, robot_->simulated() ? "simulation" : "hardware");
   s.add("mode", modeName(robot_->mode()));
-  s.add("time_mode", params_.realtime ? "realtime" : "lockstep");
+  s.add("time_mode", robot_->drivenByInput() ? "input-driven" : params_.realtime ? "realtime" : "lockstep");
   s.add("paused", paused);
   s.add("clock", clock);
   s.add("physics_time", physics_time);
@@ -153,6 +155,7 @@ void RobotDriver::onDiagnostics(const ros::WallTimerEvent&) {
   s.add("estops", counters.estops);
   s.add("faults", counters.faults);
   s.add("faulted_steps", counters.faulted_steps);
+  for (const auto& [key, value] : robot_values) s.add(key, value);
   window.step_time.clear();  // keeps the reserved storage
   window.lateness.clear();
   window.deadline_misses = window.resyncs = window.dropped = 0;

@@ -95,6 +95,9 @@ SimConfig readSimConfig(const rosutil::Params& p);
 class RobotDriver;
 // The simulation driver from ~parameters (SimulatedRobot). Throws ParameterError.
 std::unique_ptr<RobotDriver> makeSimDriver(ros::NodeHandle nh, ros::NodeHandle pnh);
+// The hardware driver from ~parameters (CanRobot, hardware_params.cpp). Throws ParameterError,
+// or std::runtime_error when the robot does not come up within ~connect_timeout.
+std::unique_ptr<RobotDriver> makeHardwareDriver(ros::NodeHandle nh, ros::NodeHandle pnh);
 
 // Publication every `steps` physics steps; the rate must divide the step rate so that the
 // published stream is regular (no 2-3-2-3 step beat). Throws ParameterError.

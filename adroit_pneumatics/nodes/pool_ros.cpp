@@ -109,7 +109,7 @@ class PoolRos {
     const Params p(pnh);
     p.checkKeys("", {"model_file", "scene", "cylinders", "pool", "group_size", "controller", "params_file", "rate",
                      "reference_timeout", "state_timeout", "stamp_tolerance", "exhaust_volts", "ilqg", "pidf",
-                     "diagnostics_period", "realtime_priority", "tick_phase"});
+                     "diagnostics_period", "realtime_priority", "tick_phase", "tick_on_state"});
     p.checkKeys("ilqg", {"horizon", "dt", "alpha_p", "alpha_u", "alpha_w", "u_min", "u_max", "iterations",
                          "feedback_fraction", "solve_every", "disturbance_gain", "disturbance_limit",
                          "u_des_steady_state", "measurement_gain", "measurement_band", "jump_threshold",
@@ -161,13 +161,17 @@ class PoolRos {
     const double diag_period = p.number("diagnostics_period", 1.0, 1e-3, 3600.0);
     realtime_priority_ = p.integer("realtime_priority", 15, 0, 98);
     tick_phase_ = p.number("tick_phase", 0.0, 0.0, 0.999999);
+    tick_on_state_ = p.boolean("tick_on_state", false);
+    if (tick_on_state_ && ros::Time::isSimTime())
+      p.fail("tick_on_state", "true needs wall time (a driver whose samples arrive on their own: the hardware)");
 
     pool_ = std::make_unique<CylinderPool>(std::move(cylinders), known, o);
     controller_ = o.controller;
     period_ = ros::Duration(1.0 / rate);
     slot_ = std::make_unique<CommandSlot>(emptyCommand(pool_->size()));
     for (const auto& n : pool_->names()) cylinder_list_ += (cylinder_list_.empty() ? "" : " ") + n;
-    if (sem_init(&command_ready_, 0, 0) != 0) throw std::runtime_error("sem_init failed");
+    if (sem_init(&command_ready_, 0, 0) != 0 || sem_init(&state_ready_, 0, 0) != 0)
+      throw std::runtime_error("sem_init failed");
 
     command_pub_ = nh.advertise<adroit_msgs::ValveCommand>("/adroit/valve_command", 10);
     diag_pub_ = nh.advertise<diagnostic_msgs::DiagnosticArray>("/adroit/diagnostics", 10);
@@ -186,10 +190,12 @@ class PoolRos {
 
   ~PoolRos() {
     running_ = false;
+    sem_post(&state_ready_);  // a state-driven tick waits on it
     if (tick_.joinable()) tick_.join();
     sem_post(&command_ready_);
     if (publisher_.joinable()) publisher_.join();
     sem_destroy(&command_ready_);
+    sem_destroy(&state_ready_);
   }
 
  private:
@@ -209,6 +215,10 @@ class PoolRos {
     if (v.ok()) {
       states_accepted_.fetch_add(1, std::memory_order_relaxed);
       state_received_ns_.store(Clock::now().time_since_epoch().count(), std::memory_order_relaxed);
+      if (tick_on_state_) {
+        int pending = 0;  // one wake-up at most: a tick uses the newest state anyway
+        if (sem_getvalue(&state_ready_, &pending) == 0 && pending == 0) sem_post(&state_ready_);
+      }
     } else {
       state_rejections_.count(counterIndex(v.reason));
       ROS_ERROR_THROTTLE(1.0, "%s: rejected actuator state (%s): %s", name_.c_str(), rejectReasonName(v.reason),
@@ -283,8 +293,28 @@ class PoolRos {
     return tick;
   }
 
+  // ~tick_on_state (the hardware): a tick as soon as a new state is in, so a sensor sample
+  // reaches the valves without waiting for the grid (the latency the reflex budget counts);
+  // after a period without a state, a tick anyway (the pool's own stale-state handling).
+  void stateTickLoop() {
+    while (running_ && ros::ok()) {
+      timespec deadline;
+      clock_gettime(CLOCK_REALTIME, &deadline);
+      const std::int64_t ns = deadline.tv_nsec + period_.toNSec();
+      deadline.tv_sec += ns / 1000000000;
+      deadline.tv_nsec = ns % 1000000000;
+      while (sem_timedwait(&state_ready_, &deadline) != 0 && errno == EINTR) {
+      }
+      if (!running_) break;
+      const double now = ros::Time::now().toSec();
+      putCommand(*slot_, now, pool_->update(now));
+      sem_post(&command_ready_);
+    }
+  }
+
   void tickLoop() {
     enterRealtime(realtime_priority_, "tick");
+    if (tick_on_state_) return stateTickLoop();
     // Under sim time the clock reads zero until the first /clock.
     while (running_ && ros::ok() && ros::Time::now().isZero()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
     ros::Time next = latestTick(ros::Time::now());
@@ -402,6 +432,8 @@ class PoolRos {
   std::thread tick_, publisher_;
   std::atomic<bool> running_{false};
   double tick_phase_ = 0.0;    // fraction of the period (latestTick)
+  bool tick_on_state_ = false;  // tick when a state arrives (stateTickLoop) instead of on the grid
+  sem_t state_ready_;          // posted by onState under ~tick_on_state
   int realtime_priority_ = 15;  // tick thread; the publisher one below (0: normal scheduling)
   std::atomic<bool> fifo_refused_{false};
   sem_t command_ready_;

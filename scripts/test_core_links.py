@@ -33,7 +33,8 @@ ROS_NAME = re.compile(
     r"rosbag\w*|roslz4|tf2_ros|tf2|tf|nodeletlib|bondcpp|class_loader|pluginlib|message_filters|"
     r"actionlib|topic_tools|image_transport|urdf|kdl_parser|adroit_ros)\.so(\.|$)")
 # Libraries that are core libraries by name besides lib*_core.so.
-EXTRA_CORE = ("libadroit_description.so",)
+EXTRA_CORE = ("libadroit_description.so", "libadroit_driver_can.so", "libadroit_can_robot.so",
+              "libadroit_hardware_emulator.so")
 
 
 def core_libraries(install_base):

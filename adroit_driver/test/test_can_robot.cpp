@@ -757,6 +757,22 @@ TEST_F(CanRobotTest, ASilentStreamIsAFaultNamingIt) {
   EXPECT_FALSE(robot_->safety().safe_state);
 }
 
+TEST_F(CanRobotTest, AStallOfTheDriverIsNotSilenceOfTheBuses) {
+  start();
+  run(0.02);
+  // The whole machine stalls for 20 ms (a virtual machine whose emulated boards stall with the
+  // driver): nothing is sent, nothing is stepped. Without the discount every stream would be
+  // 3 periods silent at the next step.
+  boards_.tick += 20;
+  run(0.01);
+  EXPECT_FALSE(robot_->safety().safe_state) << robot_->describe(robot_->safetyEvents().last);
+  // A stream that stays silent while the driver runs is still found.
+  boards_.muted.insert(can::kPressureIdBase + 8 * 2);
+  run(0.02);
+  EXPECT_TRUE(robot_->safety().fault_latched);
+  EXPECT_EQ(robot_->safetyEvents().fault.index, 0x150);
+}
+
 TEST_F(CanRobotTest, AMissingHeartbeatIsAFault) {
   start();
   boards_.muted.insert(can::kHeartbeatIdBase + can::valveBoardNode(3));

@@ -214,7 +214,11 @@ bool DriverConnection::reset(const std::vector<double>& qpos, const std::vector<
   adroit_msgs::Reset reset;
   reset.request.qpos = qpos;
   reset.request.pressure = pressure;
-  if (!reset_client_.call(reset) || !reset.response.success) {
+  const bool called = reset_client_.call(reset);
+  if (called && !reset.response.success && pacing_ == Pacing::kRealtime &&
+      reset.response.message.find("only in simulation") != std::string::npos)
+    return resetByControl(pressure.size(), hold_volts, error);
+  if (!called || !reset.response.success) {
     error = "driver " + ns_ + ": reset refused: " + reset.response.message;
     return false;
   }
@@ -232,6 +236,28 @@ bool DriverConnection::reset(const std::vector<double>& qpos, const std::vector<
   // and nothing stamped before the reset counts as fresh.
   reset_floor_ = sim_time_;
   return send(std::vector<double>(pressure.size(), hold_volts), error) && step(kSettleSteps, error);
+}
+
+// A real robot cannot be teleported: every cylinder is exhausted for kRealResetSettle, so the
+// hand comes to rest in its passive posture, then sealed at the hold command; the rollout
+// starts from there (the initial state is measured, not set, as on the thesis's hardware).
+bool DriverConnection::resetByControl(std::size_t cylinders, double hold_volts, std::string& error) {
+  {
+    std::lock_guard<std::mutex> lock(command_mutex_);
+    hold_volts_.assign(cylinders, kExhaustVolts);
+    publish(hold_volts_);
+  }
+  holding_.store(true);
+  ros::WallDuration(kRealResetSettle).sleep();
+  if (!safe(error)) return false;
+  {
+    std::lock_guard<std::mutex> lock(command_mutex_);
+    hold_volts_.assign(cylinders, hold_volts);
+    publish(hold_volts_);
+  }
+  reset_floor_ = ros::Time::now();
+  ++resets_by_control_;
+  return true;
 }
 
 bool DriverConnection::send(const std::vector<double>& volts, std::string& error) {

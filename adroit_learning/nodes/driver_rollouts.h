@@ -53,6 +53,8 @@ class DriverConnection {
   // Resets to qpos/pressure with every valve at `hold_volts`. Lockstep: paused, then two
   // physics steps so every sensor stream reports the reset state. Realtime: the valves stay
   // held (keep-alive) until the rollout's first command.
+  // A real robot refuses /reset (it exists only in simulation): realtime pacing then resets by
+  // control (resetByControl) and the rollout starts from the measured rest posture.
   bool reset(const std::vector<double>& qpos, const std::vector<double>& pressure, double hold_volts,
              std::string& error);
   // The observation at control step t of a rollout: lockstep, the newest state stamped at the
@@ -85,6 +87,10 @@ class DriverConnection {
 
   std::string ns_;
   double timeout_;
+  static constexpr double kRealResetSettle = 2.0;  // s, every cylinder exhausted before a rollout on a real robot
+  static constexpr double kExhaustVolts = -5.0;
+  std::uint64_t resets_by_control_ = 0;
+  bool resetByControl(std::size_t cylinders, double hold_volts, std::string& error);
   Pacing pacing_;
   ros::Subscriber joints_sub_, actuators_sub_, odom_sub_, safe_sub_;
   ros::Publisher valve_pub_;

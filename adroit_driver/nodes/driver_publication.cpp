@@ -8,6 +8,7 @@
 #include <rosgraph_msgs/Clock.h>
 
 #include "adroit_core/scheduling.h"
+#include "object_odometry.h"
 #include "robot_driver.h"
 
 namespace adroit::driver {
@@ -202,25 +203,8 @@ void RobotDriver::fillMessages(const Batch& batch) {
     touch_msg_.force = s.touch;
   }
   if (batch.object) {
-    const auto& o = s.object;
     odom_msg_.header.stamp = batch.stamp;
-    auto& pose = odom_msg_.pose.pose;
-    pose.position.x = o[0], pose.position.y = o[1], pose.position.z = o[2];
-    pose.orientation.w = o[3], pose.orientation.x = o[4], pose.orientation.y = o[5], pose.orientation.z = o[6];
-    // nav_msgs/Odometry: twist in the child (object) frame. MuJoCo's free joint gives the
-    // linear velocity in the world frame and the angular one in the body frame.
-    double rot[9], linear_body[3];
-    mju_quat2Mat(rot, o.data() + 3);
-    mju_rotVecMatT(linear_body, o.data() + 7, rot);
-    auto& tw = odom_msg_.twist.twist;
-    tw.linear.x = linear_body[0], tw.linear.y = linear_body[1], tw.linear.z = linear_body[2];
-    tw.angular.x = o[10], tw.angular.y = o[11], tw.angular.z = o[12];
-    object_tf_.header = odom_msg_.header;
-    object_tf_.child_frame_id = odom_msg_.child_frame_id;
-    object_tf_.transform.translation.x = pose.position.x;
-    object_tf_.transform.translation.y = pose.position.y;
-    object_tf_.transform.translation.z = pose.position.z;
-    object_tf_.transform.rotation = pose.orientation;
+    fillObjectOdometry(s.object, &odom_msg_, &object_tf_);
   }
   if (batch.base) {
     const auto& b = s.base;

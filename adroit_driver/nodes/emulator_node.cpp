@@ -24,6 +24,7 @@
 #include "adroit_msgs/InjectFault.h"
 #include "adroit_ros/diagnostics.h"
 #include "adroit_ros/params.h"
+#include "object_odometry.h"
 
 namespace adroit::driver {
 namespace {
@@ -69,15 +70,6 @@ std::vector<std::string> readBusPaths(const rosutil::Params& p, const std::vecto
   return paths;
 }
 
-const char* stateName(can::NodeState state) {
-  switch (state) {
-    case can::NodeState::kBoot: return "boot";
-    case can::NodeState::kOperational: return "operational";
-    case can::NodeState::kSafe: return "safe";
-    case can::NodeState::kFault: return "fault";
-  }
-  return "?";
-}
 
 std::string flagsText(std::uint8_t flags) {
   std::string t;
@@ -169,27 +161,10 @@ class EmulatorNode {
   void publishObject(const ros::WallTimerEvent&) {
     const can::EmulatorSnapshot s = emulator_->snapshot();
     if (s.steps == 0) return;
-    const auto& o = s.object;
     odom_msg_.header.stamp = ros::Time::now();
-    auto& pose = odom_msg_.pose.pose;
-    pose.position.x = o[0], pose.position.y = o[1], pose.position.z = o[2];
-    pose.orientation.w = o[3], pose.orientation.x = o[4], pose.orientation.y = o[5], pose.orientation.z = o[6];
-    // nav_msgs/Odometry: twist in the child frame; the free joint gives the linear velocity
-    // in the world frame and the angular one in the body frame.
-    double rot[9], linear_body[3];
-    mju_quat2Mat(rot, o.data() + 3);
-    mju_rotVecMatT(linear_body, o.data() + 7, rot);
-    auto& tw = odom_msg_.twist.twist;
-    tw.linear.x = linear_body[0], tw.linear.y = linear_body[1], tw.linear.z = linear_body[2];
-    tw.angular.x = o[10], tw.angular.y = o[11], tw.angular.z = o[12];
-    odom_pub_.publish(odom_msg_);
     geometry_msgs::TransformStamped t;
-    t.header = odom_msg_.header;
-    t.child_frame_id = odom_msg_.child_frame_id;
-    t.transform.translation.x = pose.position.x;
-    t.transform.translation.y = pose.position.y;
-    t.transform.translation.z = pose.position.z;
-    t.transform.rotation = pose.orientation;
+    fillObjectOdometry(s.object, &odom_msg_, &t);
+    odom_pub_.publish(odom_msg_);
     tf_->sendTransform(t);
   }
 
@@ -219,7 +194,7 @@ class EmulatorNode {
       if (!b.connected) waiting += " " + b.name;
     }
     const auto board = [&d](const std::string& name, const can::BoardStatus& b) {
-      d.add(name, std::string(stateName(b.state)) + flagsText(b.flags) + ", faults sent " +
+      d.add(name, std::string(can::nodeStateName(b.state)) + flagsText(b.flags) + ", faults sent " +
                       std::to_string(b.faults_sent));
     };
     board("palm", s.palm);

@@ -4,6 +4,8 @@
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <rosgraph_msgs/Clock.h>
 
+#include <cstdio>
+
 #include "adroit_core/scheduling.h"
 
 namespace adroit::driver {
@@ -89,6 +91,23 @@ RobotDriver::RobotDriver(ros::NodeHandle nh, DriverParams params, std::unique_pt
 }
 
 RobotDriver::~RobotDriver() { stop(); }
+
+int runDriverNode(int argc, char** argv, const char* name, DriverFactory make) {
+  ros::init(argc, argv, name);
+  std::unique_ptr<RobotDriver> driver;
+  try {
+    driver = make(ros::NodeHandle(), ros::NodeHandle("~"));
+  } catch (const std::exception& e) {
+    // One line on stderr (rosconsole prints nothing before the node has started).
+    std::fprintf(stderr, "[FATAL] %s: %s\n", name, e.what());
+    return 1;
+  }
+  driver->start();
+  ros::MultiThreadedSpinner spinner(2);
+  spinner.spin();
+  driver->stop();
+  return 0;
+}
 
 void RobotDriver::start() {
   if (running_.exchange(true)) return;

@@ -98,6 +98,11 @@ std::unique_ptr<RobotDriver> makeSimDriver(ros::NodeHandle nh, ros::NodeHandle p
 // The hardware driver from ~parameters (CanRobot, hardware_params.cpp). Throws ParameterError,
 // or std::runtime_error when the robot does not come up within ~connect_timeout.
 std::unique_ptr<RobotDriver> makeHardwareDriver(ros::NodeHandle nh, ros::NodeHandle pnh);
+// A driver node's main(): ros::init as `name`, the driver from `make` (one [FATAL] line and
+// exit code 1 when it throws), then two spinner threads for the default queue (a long /step
+// must not hold up diagnostics; the safety path has its own queue and thread).
+using DriverFactory = std::unique_ptr<RobotDriver> (*)(ros::NodeHandle nh, ros::NodeHandle pnh);
+int runDriverNode(int argc, char** argv, const char* name, DriverFactory make);
 
 // Publication every `steps` physics steps; the rate must divide the step rate so that the
 // published stream is regular (no 2-3-2-3 step beat). Throws ParameterError.

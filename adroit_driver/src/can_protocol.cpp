@@ -524,4 +524,14 @@ void SequenceTracker::restart(std::uint8_t seq) {
 
 void SequenceTracker::reset() { *this = SequenceTracker(); }
 
+const char* nodeStateName(NodeState state) {
+  switch (state) {
+    case NodeState::kBoot: return "boot";
+    case NodeState::kOperational: return "operational";
+    case NodeState::kSafe: return "safe";
+    case NodeState::kFault: return "fault";
+  }
+  return "?";
+}
+
 }  // namespace adroit::driver::can

@@ -74,15 +74,6 @@ const char* faultCodeText(can::FaultCode code) {
   return "fault";
 }
 
-const char* nodeStateName(can::NodeState state) {
-  switch (state) {
-    case can::NodeState::kBoot: return "boot";
-    case can::NodeState::kOperational: return "operational";
-    case can::NodeState::kSafe: return "safe";
-    case can::NodeState::kFault: return "fault";
-  }
-  return "?";
-}
 
 // The mapping must fit the model and the protocol; one line naming what does not.
 void checkMapping(const can::Mapping& m, std::size_t joints, std::size_t cylinders,
@@ -1011,24 +1002,8 @@ CommandResult CanRobot::applyValves(const CheckedCommand& checked) {
 }
 
 CommandResult CanRobot::acceptCommand(const CheckedCommand& checked, double t) {
-  CommandResult result{checked.verdict, false, checked.error};
-  switch (checked.verdict) {
-    case CommandVerdict::kAccepted: break;
-    case CommandVerdict::kClamped: ++counters_.clamped; break;
-    case CommandVerdict::kBadAddressing:
-    case CommandVerdict::kDuplicate:
-    case CommandVerdict::kEmpty: ++counters_.rejected_addressing; return result;
-    case CommandVerdict::kUnknownName:
-    case CommandVerdict::kIndexOutOfRange: ++counters_.rejected_name; return result;
-    case CommandVerdict::kNotFinite: ++counters_.rejected_not_finite; return result;
-    case CommandVerdict::kOutOfRange: ++counters_.rejected_range; return result;
-  }
-  if (safety_.safe_state) {
-    ++counters_.ignored_while_safe;
-    result.error = "ignored: robot is in the safe state (release required)";
-    return result;
-  }
-  ++counters_.accepted;
+  CommandResult result = countCommand(checked, safety_.safe_state, &counters_);
+  if (!result.applied) return result;
   for (std::size_t k = 0; k < checked.actuator.size(); ++k) {
     const int a = checked.actuator[k];
     if (last_command_clock_[a] == kNeverCommanded) --never_commanded_;
@@ -1043,7 +1018,6 @@ CommandResult CanRobot::acceptCommand(const CheckedCommand& checked, double t) {
     }
   }
   safety_.watchdog_armed = true;
-  result.applied = true;
   return result;
 }
 
@@ -1398,7 +1372,7 @@ std::string CanRobot::faultText(const SafetyEvent& e, const FaultDetail* d) cons
       }
       const auto state = static_cast<can::NodeState>(d ? d->code : 0);
       if (kind == FaultKind::kBoardSafe) {
-        std::string text = node + " went " + nodeStateName(state) + " on its own while commanded";
+        std::string text = node + " went " + can::nodeStateName(state) + " on its own while commanded";
         if (d->channel & can::kFlagWatchdog) text += " (its command watchdog tripped)";
         if (d->channel & can::kFlagEstopInput) text += " (its e-stop input is held)";
         return text;
@@ -1496,7 +1470,7 @@ void CanRobot::addDiagnostics(DiagnosticValues* values) const {
   for (int number : expected_nodes_) {
     const Node& node = nodes_[number];
     std::string text = node.last_heartbeat == kNever ? std::string("never heard")
-                                                     : std::string(nodeStateName(node.state)) + ", heartbeat " +
+                                                     : std::string(can::nodeStateName(node.state)) + ", heartbeat " +
                                                            format(t - node.last_heartbeat) + " s ago";
     if (node.bad_version >= 0) text += ", protocol version " + std::to_string(node.bad_version);
     if (node.flags & can::kFlagEstopInput) text += ", e-stop input held";

@@ -9,6 +9,29 @@ bool refuse(const char* what, std::string* error) {
 }
 }  // namespace
 
+CommandResult countCommand(const CheckedCommand& checked, bool safe_state, Counters* counters) {
+  CommandResult result{checked.verdict, false, checked.error};
+  switch (checked.verdict) {
+    case CommandVerdict::kAccepted: break;
+    case CommandVerdict::kClamped: ++counters->clamped; break;
+    case CommandVerdict::kBadAddressing:
+    case CommandVerdict::kDuplicate:
+    case CommandVerdict::kEmpty: ++counters->rejected_addressing; return result;
+    case CommandVerdict::kUnknownName:
+    case CommandVerdict::kIndexOutOfRange: ++counters->rejected_name; return result;
+    case CommandVerdict::kNotFinite: ++counters->rejected_not_finite; return result;
+    case CommandVerdict::kOutOfRange: ++counters->rejected_range; return result;
+  }
+  if (safe_state) {
+    ++counters->ignored_while_safe;
+    result.error = "ignored: robot is in the safe state (release required)";
+    return result;
+  }
+  ++counters->accepted;
+  result.applied = true;
+  return result;
+}
+
 bool Robot::resetToKeyframe(const std::string&, std::string* error) { return refuse("reset", error); }
 bool Robot::resetToState(const std::vector<double>&, const std::vector<double>&, const std::vector<double>&,
                          std::string* error) {

@@ -137,25 +137,8 @@ SimulatedRobot::SimulatedRobot(const SimConfig& config) : config_(config) {
 // ---------------------------------------------------------------------------- commands
 
 CommandResult SimulatedRobot::acceptCommand(const CheckedCommand& checked) {
-  CommandResult result{checked.verdict, false, checked.error};
-  switch (checked.verdict) {
-    case CommandVerdict::kAccepted: break;
-    case CommandVerdict::kClamped: ++counters_.clamped; break;
-    case CommandVerdict::kBadAddressing:
-    case CommandVerdict::kDuplicate:
-    case CommandVerdict::kEmpty: ++counters_.rejected_addressing; return result;
-    case CommandVerdict::kUnknownName:
-    case CommandVerdict::kIndexOutOfRange: ++counters_.rejected_name; return result;
-    case CommandVerdict::kNotFinite: ++counters_.rejected_not_finite; return result;
-    case CommandVerdict::kOutOfRange: ++counters_.rejected_range; return result;
-  }
-  if (safety_.safe_state) {
-    // Latched: commands are not acted on and do not feed the watchdog.
-    ++counters_.ignored_while_safe;
-    result.error = "ignored: robot is in the safe state (release required)";
-    return result;
-  }
-  ++counters_.accepted;
+  CommandResult result = countCommand(checked, safety_.safe_state, &counters_);
+  if (!result.applied) return result;
   for (std::size_t k = 0; k < checked.actuator.size(); ++k) {
     const int a = checked.actuator[k];
     if (last_command_clock_[a] == kNeverCommanded) --never_commanded_;
@@ -163,7 +146,6 @@ CommandResult SimulatedRobot::acceptCommand(const CheckedCommand& checked) {
     last_command_clock_[a] = clock_;
   }
   safety_.watchdog_armed = true;
-  result.applied = true;
   return result;
 }
 
@@ -292,7 +274,11 @@ std::string SimulatedRobot::faultText(const SafetyEvent& e) const {
     case FaultSource::kPressure:
       return e.cylinder < 0 ? std::string("non-finite supply pressure") : "non-finite pressure in cylinder " + cylinder();
     case FaultSource::kTension: return "non-finite tension of cylinder " + cylinder();
-    case FaultSource::kNone: break;
+    case FaultSource::kNone:
+    case FaultSource::kBus:  // the hardware's sources: the simulation never records them
+    case FaultSource::kStream:
+    case FaultSource::kHeartbeat:
+    case FaultSource::kBoard: break;
   }
   return "fault";
 }

@@ -116,6 +116,8 @@ constexpr std::uint8_t kFlagWatchdog = 0x02;    // valve board: its command watc
 constexpr std::uint8_t kFlagSupplyOpen = 0x04;  // the board that drives the supply valve: open
 constexpr std::uint8_t kHeartbeatReservedFlags = 0xF8;
 
+const char* nodeStateName(NodeState state);  // "boot", "operational", "safe", "fault"
+
 // Every node (host included) -> bus, 10 Hz.
 struct HeartbeatFrame {
   std::uint8_t node = 0;

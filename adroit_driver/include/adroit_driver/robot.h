@@ -98,6 +98,11 @@ struct CommandResult {
   std::string error;
 };
 
+// Counts a checked command as every robot does: a rejection by its reason, a valid command
+// while the safe state holds as ignored (latched: commands are not acted on and do not feed
+// the watchdog), else accepted (and clamped). `applied` in the result: the caller applies it.
+CommandResult countCommand(const CheckedCommand& checked, bool safe_state, Counters* counters);
+
 // One line of robot-specific diagnostics (key, value), e.g. per-bus frame counters.
 using DiagnosticValues = std::vector<std::pair<std::string, std::string>>;
 

@@ -25,6 +25,7 @@ run rosrun adroit_pneumatics scalar_vs_core_bench
 run rosrun adroit_mpc mpc_timing
 run rosrun adroit_mpc mpc_success --out "$WS_ROOT/log/bench" --latency-sweep 0.01,0.03,0.05
 run rosrun adroit_driver run_bench.sh ball 5 10
+ADROIT_BENCH_OUT="$WS_ROOT/log/bench/hw_latency" run rosrun adroit_driver run_hw_latency.sh 10 3
 run bash "$WS_ROOT/launch/bench/watchdog_under_load.sh" 60
 run rosrun adroit_teleop run_bench.sh --seconds 30 --out "$WS_ROOT/log/bench/teleop"
 echo "== summary =="

@@ -6,7 +6,8 @@
 # usage: run_hw_latency.sh [seconds_per_block=10] [pairs=3]
 # Writes into $ADROIT_BENCH_OUT (default /tmp/adroit_hw_latency): hw_latency.csv, hw_latency.png,
 # summary.txt, driver.log, pools_<block>.log. Other pools: ADROIT_HW_LATENCY_POOLS_ARGS="controller=pidf"
-# (k=v, roslaunch arguments), ADROIT_HW_LATENCY_POOLS_LAUNCH="<package> <file>" or a path.
+# (k=v, roslaunch arguments), ADROIT_HW_LATENCY_POOLS_LAUNCH="<package> <file>" or a path;
+# ADROIT_HW_LATENCY_FRAMES=1 also writes every frame of each block (frames_<block>.csv).
 set -euo pipefail
 export PATH=/usr/bin:$PATH
 here="$(dirname "$(readlink -f "$0")")"
@@ -52,6 +53,7 @@ trap 'exit 143' TERM
 options=(--bus-prefix "$prefix" --out "$out" --scene "$scene" --seconds "$seconds" --pairs "$pairs")
 [[ -n "${ADROIT_HW_LATENCY_POOLS_LAUNCH:-}" ]] && options+=(--pools-launch "$ADROIT_HW_LATENCY_POOLS_LAUNCH")
 [[ -n "${ADROIT_HW_LATENCY_POOLS_ARGS:-}" ]] && options+=(--pools-args "$ADROIT_HW_LATENCY_POOLS_ARGS")
+[[ -n "${ADROIT_HW_LATENCY_FRAMES:-}" ]] && options+=(--frames)
 "$bin/hw_latency_bench" "${options[@]}" > >(tee "$out/summary.txt") 2>&1 &
 bench_pid=$!
 for _ in $(seq 100); do

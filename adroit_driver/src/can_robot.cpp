@@ -960,12 +960,15 @@ void CanRobot::sendDue(double t) {
     next_cycle_ += config_.control_period;
     if (next_cycle_ <= t) next_cycle_ = t + config_.control_period;  // far behind: no burst
   }
-  // Every commanded group once per cycle, except one sent less than half a period ago (by
-  // applyValves); a command that found its group just sent goes out once half a period passed.
-  const double min_interval = 0.5 * config_.control_period - kTimeEps;
+  // A new command waiting for its group's minimum interval goes out as soon as that passed;
+  // the cycle repeats only the groups no command has sent for a whole period (the boards'
+  // 50 ms watchdog needs them), so a repeat never stands in the way of a new command.
   for (std::size_t g = 0; g < groups_.size(); ++g) {
     const ValveGroup& group = groups_[g];
-    if (group.commanded && (cycle || group.pending) && t - group.last_sent >= min_interval)
+    if (!group.commanded) continue;
+    const double since = t - group.last_sent;
+    if ((group.pending && since >= kMinGroupInterval - kTimeEps) ||
+        (cycle && since >= config_.control_period - kTimeEps))
       sendGroup(static_cast<int>(g), t);
   }
 }
@@ -992,10 +995,10 @@ CommandResult CanRobot::applyValves(const CheckedCommand& checked) {
   CommandResult result = acceptCommand(checked, t);
   if (!result.applied) return result;
   // Lowest latency from the sensors through the pools to the valves: out at once, unless the
-  // group went out less than half a cycle ago (then step() sends it when that has passed).
-  const double min_interval = 0.5 * config_.control_period - kTimeEps;
+  // group went out less than kMinGroupInterval ago (a flood of commands: step() sends it when
+  // that has passed, so no group exceeds 500 Hz and the bus stays within budget).
   for (int g : touched_groups_)
-    if (t - groups_[g].last_sent >= min_interval) sendGroup(g, t);
+    if (t - groups_[g].last_sent >= kMinGroupInterval - kTimeEps) sendGroup(g, t);
   touched_groups_.clear();
   latchBusFaults();
   return result;

@@ -69,6 +69,9 @@ std::string validate(const CanRobotConfig& config);
 constexpr double kHeartbeatPeriod = 0.1;   // s, host heartbeats (and the e-stop repeat while latched)
 constexpr double kHeartbeatTimeout = 0.3;  // s, a node's heartbeat missing this long is a fault
 constexpr int kSilentPeriods = 3;          // a stream silent this many periods is a fault
+// A valve group is sent at most this often (500 Hz): a controller's commands at the sensor rate
+// (the pools, 250 Hz) go out at once; a flood cannot take the bus (docs: bus load).
+constexpr double kMinGroupInterval = 0.002;  // s
 
 class CanRobot final : public Robot {
  public:
@@ -87,7 +90,7 @@ class CanRobot final : public Robot {
   CheckedCommand checkForces(const std::vector<std::string>& names, const std::vector<std::uint16_t>& indices,
                              const std::vector<double>& newtons) const override;
   // Counts and stores as SimulatedRobot, and sends the affected groups at once (a group sent
-  // less than control_period / 2 ago goes out as soon as that much time has passed).
+  // less than kMinGroupInterval ago goes out as soon as that much time has passed).
   CommandResult applyValves(const CheckedCommand& checked) override;
   CommandResult applyForces(const CheckedCommand& checked) override;
 

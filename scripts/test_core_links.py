@@ -34,7 +34,7 @@ ROS_NAME = re.compile(
     r"actionlib|topic_tools|image_transport|urdf|kdl_parser|adroit_ros)\.so(\.|$)")
 # Libraries that are core libraries by name besides lib*_core.so.
 EXTRA_CORE = ("libadroit_description.so", "libadroit_driver_can.so", "libadroit_can_robot.so",
-              "libadroit_hardware_emulator.so")
+              "libadroit_hardware_emulator.so", "libadroit_characterisation.so")
 
 
 def core_libraries(install_base):

@@ -21,6 +21,7 @@
 #include <adroit_msgs/Train.h>
 #include <adroit_msgs/TrainProgress.h>
 #include <adroit_msgs/TrainStatus.h>
+#include <adroit_ros/node_main.h>
 #include <adroit_ros/params.h>
 #include <ros/package.h>
 #include <ros/ros.h>
@@ -389,16 +390,5 @@ class TrainerNode {
 }  // namespace adroit::learning_node
 
 int main(int argc, char** argv) {
-  ros::init(argc, argv, "adroit_learning");
-  ros::NodeHandle nh, pnh("~");
-  try {
-    adroit::learning_node::TrainerNode node(nh, pnh);
-    ros::AsyncSpinner spinner(4);
-    spinner.start();
-    ros::waitForShutdown();
-  } catch (const adroit::rosutil::ParameterError& e) {
-    ROS_FATAL("%s", e.what());
-    return 1;
-  }
-  return 0;
+  return adroit::rosutil::runNode<adroit::learning_node::TrainerNode>(argc, argv, "adroit_learning", 4);
 }

@@ -17,6 +17,7 @@
 #include <std_msgs/Bool.h>
 
 #include "adroit_ros/diagnostics.h"
+#include "adroit_ros/node_main.h"
 #include "adroit_ros/params.h"
 #include "adroit_teleop/glove_driver.h"
 
@@ -155,16 +156,5 @@ class GloveNode {
 }  // namespace adroit::teleop
 
 int main(int argc, char** argv) {
-  ros::init(argc, argv, "glove");
-  ros::NodeHandle nh, pnh("~");
-  try {
-    adroit::teleop::GloveNode node(nh, pnh);
-    ros::AsyncSpinner spinner(1);
-    spinner.start();
-    ros::waitForShutdown();
-  } catch (const adroit::rosutil::ParameterError& e) {
-    ROS_FATAL("%s", e.what());
-    return 1;
-  }
-  return 0;
+  return adroit::rosutil::runNode<adroit::teleop::GloveNode>(argc, argv, "glove", 1);
 }

@@ -36,6 +36,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include "adroit_ros/diagnostics.h"
+#include "adroit_ros/node_main.h"
 #include "adroit_ros/params.h"
 #include "adroit_teleop/calibration_session.h"
 #include "adroit_teleop/glove_protocol.h"
@@ -451,16 +452,6 @@ class TeleopNode {
 }  // namespace adroit::teleop
 
 int main(int argc, char** argv) {
-  ros::init(argc, argv, "teleop");
-  ros::NodeHandle nh, pnh("~");
-  try {
-    adroit::teleop::TeleopNode node(nh, pnh);
-    ros::AsyncSpinner spinner(3);  // a calibration record waits while glove records keep coming
-    spinner.start();
-    ros::waitForShutdown();
-  } catch (const adroit::rosutil::ParameterError& e) {
-    ROS_FATAL("%s", e.what());
-    return 1;
-  }
-  return 0;
+  // 3 threads: a calibration record waits while glove records keep coming
+  return adroit::rosutil::runNode<adroit::teleop::TeleopNode>(argc, argv, "teleop", 3);
 }

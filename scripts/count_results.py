@@ -33,13 +33,14 @@ class Count:
         self.passed = self.failed = self.skipped = 0
         self.failures = []
 
-    def fail(self, what):
+    def fail(self, what, detail=""):
         self.failed += 1
-        self.failures.append(what)
+        self.failures.append((what, detail))
 
 
 def read_cases(path):
-    """(name, outcome) per test case, outcome in pass/fail/skip; None if unreadable or empty."""
+    """(name, outcome, detail) per test case, outcome in pass/fail/skip, detail the failure's text;
+    None if unreadable or empty."""
     try:
         root = ET.parse(path).getroot()
     except (ET.ParseError, OSError):
@@ -47,20 +48,23 @@ def read_cases(path):
     cases = []
     for case in root.iter("testcase"):
         name = f"{case.get('classname', '')}.{case.get('name', '')}"
-        if case.find("failure") is not None or case.find("error") is not None:
-            cases.append((name, "fail"))
+        problem = case.find("failure")
+        problem = problem if problem is not None else case.find("error")
+        if problem is not None:
+            detail = "\n".join(t for t in (problem.get("message", ""), problem.text or "") if t.strip())
+            cases.append((name, "fail", detail))
         elif case.find("skipped") is not None:
-            cases.append((name, "skip"))
+            cases.append((name, "skip", ""))
         else:
-            cases.append((name, "pass"))
+            cases.append((name, "pass", ""))
     return cases or None
 
 
 def add_cases(count, path, cases):
     failed = False
-    for name, outcome in cases:
+    for name, outcome, detail in cases:
         if outcome == "fail":
-            count.fail(f"{path}: {name}")
+            count.fail(f"{path}: {name}", detail)
             failed = True
         elif outcome == "skip":
             count.skipped += 1
@@ -100,7 +104,7 @@ def count_package(count, package_build_dir):
             outcome_by_stem[stem] = True
             continue
         wrapper_failed = False
-        for name, outcome in cases:
+        for name, outcome, _ in cases:
             test_name = name.split(".")[-1]
             inner = os.path.join(os.path.dirname(wrapper), f"rosunit-{test_name[4:]}.xml")
             if not name.startswith(WRAPPER_CLASS + ".test"):
@@ -111,7 +115,7 @@ def count_package(count, package_build_dir):
             if inner_cases is None:
                 # The test node wrote nothing usable: the wrapper's verdict is the only one.
                 why = "no result from the test node (crashed, timed out or never started)"
-                wrapper_failed |= add_cases(count, wrapper, [(f"{name}: {why}", outcome)])
+                wrapper_failed |= add_cases(count, wrapper, [(f"{name}: {why}", outcome, "")])
                 continue
             inner_failed = add_cases(count, inner, inner_cases)
             wrapper_failed |= inner_failed
@@ -136,6 +140,15 @@ def count_package(count, package_build_dir):
             count.fail(f"{package_build_dir}: ctest test {stem} exited non-zero although its results passed")
 
 
+def excerpt(detail, head=10, tail=40):
+    """The failure text a CI log can show: its first and last lines (the assertion and the output
+    it quotes), so a failure on a machine we cannot log into still says why."""
+    lines = [l.rstrip() for l in detail.splitlines() if l.strip()]
+    if len(lines) <= head + tail:
+        return lines
+    return lines[:head] + [f"... ({len(lines) - head - tail} lines left out)"] + lines[-tail:]
+
+
 def main(build_dirs, failed_commands=()):
     """build_dirs: one build directory or a list of them."""
     if isinstance(build_dirs, str):
@@ -148,8 +161,10 @@ def main(build_dirs, failed_commands=()):
         # A runner that failed without any failing result left a failure we cannot see.
         for command in failed_commands:
             count.fail(f"{command} exited non-zero with no failing result")
-    for f in count.failures:
-        print(f"FAILED {f}")
+    for what, detail in count.failures:
+        print(f"FAILED {what}")
+        for line in excerpt(detail):
+            print(f"    {line}")
     line = f"{count.passed} passed, {count.failed} failed"
     if count.skipped:
         line += f", {count.skipped} skipped"

@@ -147,6 +147,20 @@ def test_several_build_directories_are_counted_together(tmp_path, capsys):
     assert count_results.main([str(main_tree.build), str(asan.build)]) == 1
     lines = capsys.readouterr().out.strip().splitlines()
     assert lines[-1] == "3 passed, 1 failed"
-    assert lines[:-1] == [f"FAILED {asan.results}/gtest-test_x.xml: X.b"]
+    assert lines[:-1] == [f"FAILED {asan.results}/gtest-test_x.xml: X.b", "    boom"]
     assert count_results.main([str(main_tree.build), str(tmp_path / "never_built")]) == 0
     assert capsys.readouterr().out.strip().splitlines()[-1] == "2 passed, 0 failed"
+
+
+def test_a_failure_prints_its_text_so_a_ci_log_says_why(tree, capsys):
+    long_log = "\n".join(f"tool line {i}" for i in range(200))
+    failing = ('<testcase classname="__main__.T" name="quick"><failure message="AssertionError: 1 != 0">'
+               f'Traceback line\n{long_log}\nlast words</failure></testcase>')
+    tree.write("rosunit-x.xml", suite(failing))
+    code, line, printed = tree.count(capsys)
+    assert (code, line) == (1, "0 passed, 1 failed")
+    assert printed[0].startswith("FAILED ") and printed[0].endswith("__main__.T.quick")
+    assert printed[1] == "    AssertionError: 1 != 0"
+    assert printed[-1] == "    last words"
+    assert any("lines left out" in p for p in printed)
+    assert len(printed) < 60

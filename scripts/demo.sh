@@ -10,7 +10,8 @@
 # (force_tracking_audit) over a rosbag recorded during the run, log/demo/forces.bag.
 # Exit status: demo_report's (non-zero when the stack did not run sound).
 # Extra arguments go to roslaunch, e.g. `bash scripts/demo.sh rviz:=true planner:=sampling`;
-# `task:=none` runs the earlier finger-wave demo (`duration:=60` sets its report window).
+# `task:=none` runs the earlier finger-wave demo (`duration:=60` sets its report window);
+# `robot:=emulated` runs it on the hardware driver over the CAN hardware emulator (hardware.launch).
 # Afterwards it renders an image strip of the run offscreen with MuJoCo (render_states under
 # xvfb-run) into log/demo/demo_strip.png.
 set -euo pipefail
@@ -23,22 +24,32 @@ source_workspace
 
 duration=20
 task=catch
+robot=sim
 launch_args=()
 for arg in "$@"; do
   case "$arg" in
     duration:=*) duration="${arg#duration:=}" ;;
     task:=*) task="${arg#task:=}"; launch_args+=("$arg") ;;
+    robot:=*) robot="${arg#robot:=}"; launch_args+=("$arg") ;;
     *) launch_args+=("$arg") ;;
   esac
 done
 report_args=(_duration:="$duration")
 if [ "$task" = catch ]; then report_args+=(_drop_height:=0.07 _watch:=3.0); fi
+driver=adroit_sim
+if [ "$robot" = emulated ]; then
+  driver=adroit_hw
+  report_args+=(_driver:=adroit_hw _start_with:=estop_release _place_service:=/adroit_can_emulator/set_object_pose)
+elif [ "$robot" != sim ]; then
+  echo "demo: robot:=$robot: expected sim or emulated" >&2
+  exit 2
+fi
 
 echo
 echo "== the ADROIT scenes (3 simulated seconds each, zero tension) =="
 rosrun adroit_description scene_report --seconds 3
 echo
-echo "== sim bringup: driver + pneumatic pools + behaviour MPC, task $task =="
+echo "== $robot bringup: driver + pneumatic pools + behaviour MPC, task $task =="
 # A private master on a free port, so the demo never collides with a running ROS system.
 port=$((20000 + RANDOM % 20000))
 export ROS_MASTER_URI="http://127.0.0.1:$port"
@@ -54,7 +65,7 @@ out_dir="$WS_ROOT/log/demo"
 mkdir -p "$out_dir"
 rm -f "$out_dir"/states.csv "$out_dir"/frame_*.ppm "$out_dir"/forces.bag "$out_dir"/forces.bag.active
 set +e
-scene="$(rosparam get /adroit_sim/scene 2>/dev/null)"
+scene="$(rosparam get "/$driver/scene" 2>/dev/null)"
 # The pools' input and output for the force-tracking audit below (a real rosbag; SIGINT
 # closes it cleanly).
 rosbag record -q -O "$out_dir/forces.bag" /adroit/actuator_states /adroit/force_reference \

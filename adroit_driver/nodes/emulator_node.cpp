@@ -22,6 +22,7 @@
 #include "adroit_driver/can_calibration.h"
 #include "adroit_driver/hardware_emulator.h"
 #include "adroit_msgs/InjectFault.h"
+#include "adroit_msgs/SetObjectPose.h"
 #include "adroit_ros/diagnostics.h"
 #include "adroit_ros/params.h"
 #include "object_odometry.h"
@@ -109,6 +110,7 @@ class EmulatorNode {
       odom_msg_.header.frame_id = "world";
       odom_msg_.child_frame_id = "object";
       tf_ = std::make_unique<tf2_ros::TransformBroadcaster>();
+      place_srv_ = pnh_.advertiseService("set_object_pose", &EmulatorNode::onPlaceObject, this);
     }
     inject_srv_ = pnh_.advertiseService("inject_fault", &EmulatorNode::onInjectFault, this);
   }
@@ -145,6 +147,20 @@ class EmulatorNode {
       ROS_WARN("%s: inject_fault %s: %s", kName, req.fault.c_str(), res.message.c_str());
     else
       ROS_ERROR("%s: inject_fault refused: %s", kName, res.message.c_str());
+    return true;
+  }
+
+  // A person in the lab putting the object somewhere (the driver's /adroit/set_object_pose is
+  // the simulation's: on a robot it refuses). Same request, same checks.
+  bool onPlaceObject(adroit_msgs::SetObjectPose::Request& req, adroit_msgs::SetObjectPose::Response& res) {
+    const auto& p = req.pose.position;
+    const auto& q = req.pose.orientation;
+    const auto& l = req.twist.linear;
+    const auto& a = req.twist.angular;
+    std::string error;
+    res.success = emulator_->placeObject({p.x, p.y, p.z}, {q.w, q.x, q.y, q.z}, {l.x, l.y, l.z}, {a.x, a.y, a.z}, &error);
+    res.message = res.success ? "object placed" : error;
+    if (!res.success) ROS_WARN("%s: set_object_pose refused: %s", kName, error.c_str());
     return true;
   }
 
@@ -222,7 +238,7 @@ class EmulatorNode {
   std::unique_ptr<can::HardwareEmulator> emulator_;
   std::string calibration_;
   ros::Publisher truth_pub_, odom_pub_, diag_pub_;
-  ros::ServiceServer inject_srv_;
+  ros::ServiceServer inject_srv_, place_srv_;
   ros::WallTimer truth_timer_, object_timer_, diag_timer_;
   std::unique_ptr<tf2_ros::TransformBroadcaster> tf_;
   sensor_msgs::JointState truth_msg_;

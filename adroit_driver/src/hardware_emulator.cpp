@@ -7,6 +7,7 @@
 #include <atomic>
 #include <cctype>
 #include <chrono>
+#include <condition_variable>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -308,6 +309,7 @@ struct HardwareEmulator::Impl {
   std::uint8_t flagsOf(std::uint8_t node) const;
   NodeState stateOf(std::uint8_t node) const;
   void publish();
+  void placeObject();  // a placement asked for by HardwareEmulator::placeObject
 
   // --- any thread ---
   void checkBus(int bus) const;
@@ -341,8 +343,14 @@ struct HardwareEmulator::Impl {
   double joint_period_ = 0, touch_period_ = 0, sensor_period_ = 0, heartbeat_period_ = 0;
 
   // Simulation state.
+  struct Placement {
+    std::array<double, 3> position, linear, angular;
+    std::array<double, 4> quaternion;
+    std::uint64_t id;
+  };
   Calibration calibration_;
   Settings active_;
+  std::optional<Placement> placing_;  // taken from placement_ at the start of the step
   std::vector<Action> actions_;
   std::array<bool, kNodes> button_was_{};
   std::vector<char> stuck_was_;
@@ -370,6 +378,11 @@ struct HardwareEmulator::Impl {
   std::vector<Action> pending_;
   std::optional<Calibration> new_calibration_;
   EmulatorSnapshot published_;
+  std::optional<Placement> placement_;           // the next step applies it
+  std::uint64_t placements_done_ = 0;            // id of the last placement applied or refused
+  std::string placement_error_;                  // its refusal ("" applied)
+  std::condition_variable_any placed_;
+  std::uint64_t placements_requested_ = 0;
 
   std::thread thread_;
   std::atomic<int> fifo_{0};  // the thread's scheduling: 1 SCHED_FIFO, -1 refused, 0 not asked (yet)
@@ -526,6 +539,7 @@ void HardwareEmulator::Impl::run() {
 void HardwareEmulator::Impl::tick() {
   const double now = robot_->clock();
   takeSettings();
+  placeObject();
   acceptConnections();
   runActions(now);
   pressButtons(now);
@@ -549,10 +563,26 @@ void HardwareEmulator::Impl::takeSettings() {
   active_ = settings_;  // same sizes: no allocation
   actions_.clear();
   actions_.swap(pending_);
+  placing_ = placement_;
+  placement_.reset();
   if (new_calibration_) {
     calibration_ = std::move(*new_calibration_);
     new_calibration_.reset();
   }
+}
+
+void HardwareEmulator::Impl::placeObject() {
+  if (!placing_) return;
+  std::string error;
+  const Placement& p = *placing_;
+  const bool ok = robot_->setObjectPose(p.position, p.quaternion, p.linear, p.angular, &error);
+  {
+    std::lock_guard<PiMutex> lock(mutex_);
+    placements_done_ = p.id;
+    placement_error_ = ok ? std::string() : error;
+  }
+  placing_.reset();
+  placed_.notify_all();
 }
 
 void HardwareEmulator::Impl::acceptConnections() {
@@ -1329,6 +1359,38 @@ void HardwareEmulator::clearFaults() {
   s.delay.assign(buses, 0);
   s.stuck.assign(cylinders, 0);
   impl_->pending_.push_back({ActionKind::kPowerCycle});
+}
+
+bool HardwareEmulator::placeObject(const std::array<double, 3>& position, const std::array<double, 4>& quaternion,
+                                   const std::array<double, 3>& linear, const std::array<double, 3>& angular,
+                                   std::string* error, double timeout) {
+  Impl& m = *impl_;
+  std::unique_lock<PiMutex> lock(m.mutex_);
+  const std::uint64_t id = ++m.placements_requested_;
+  const Impl::Placement placement{position, linear, angular, quaternion, id};
+  if (!m.thread_.joinable()) {  // nobody else steps: apply it here
+    lock.unlock();
+    m.placing_ = placement;
+    m.placeObject();
+    lock.lock();
+  } else {
+    m.placement_ = placement;  // a newer request replaces one the thread has not taken yet
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout);
+    if (!m.placed_.wait_until(lock, deadline, [&] { return m.placements_done_ >= id; })) {
+      if (m.placement_ && m.placement_->id == id) m.placement_.reset();  // not later, unasked
+      if (error) *error = "the emulator's simulation did not step within " + std::to_string(timeout) + " s";
+      return false;
+    }
+  }
+  if (m.placements_done_ != id) {
+    if (error) *error = "replaced by a newer placement before it was applied";
+    return false;
+  }
+  if (!m.placement_error_.empty()) {
+    if (error) *error = m.placement_error_;
+    return false;
+  }
+  return true;
 }
 
 bool HardwareEmulator::inject(const std::string& fault, const std::string& target, double value,

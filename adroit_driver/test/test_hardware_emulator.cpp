@@ -1008,5 +1008,62 @@ TEST_F(Emulator, TheHandSceneHasItsOwnLayout) {
   EXPECT_EQ(snap.valve_boards.size(), (e.cylinderNames().size() + 7) / 8);
 }
 
+// The lab's hand placing the object: the boards' world moves it (the motion-capture stand-in
+// then reports it there), with the simulation's checks.
+std::array<double, 3> placedObjectPosition(const HardwareEmulator& e) {
+  const auto s = e.snapshot();
+  return {s.object[0], s.object[1], s.object[2]};
+}
+
+TEST_F(Emulator, PlaceObjectMovesTheObjectAtTheNextStepWithTheSimulationsChecks) {
+  EmulatorConfig c = config();
+  c.sim = simConfig("bottle");
+  make(c);
+  ASSERT_TRUE(emulator_->hasObject());
+  const std::array<double, 3> target{0.3, -0.4, 1.0}, still{0, 0, 0};
+  const auto before = placedObjectPosition(*emulator_);
+  ASSERT_GT(std::hypot(before[0] - target[0], before[1] - target[1]), 0.2);  // a move worth checking
+  std::string error;
+  ASSERT_TRUE(emulator_->placeObject(target, {2, 0, 0, 0}, still, still, &error)) << error;  // normalised
+  for (int k = 0; k < 10; ++k) emulator_->tick();  // the motion capture's 5 ms delay
+  const auto after = placedObjectPosition(*emulator_);
+  EXPECT_NEAR(after[0], target[0], 0.005);
+  EXPECT_NEAR(after[1], target[1], 0.005);
+  EXPECT_NEAR(after[2], target[2], 0.005);  // 20 ms of fall: 2 mm
+  EXPECT_NEAR(emulator_->snapshot().object[3], 1.0, 1e-3);
+
+  EXPECT_FALSE(emulator_->placeObject(target, {0, 0, 0, 0}, still, still, &error));
+  EXPECT_NE(error.find("quaternion"), std::string::npos) << error;
+  EXPECT_FALSE(emulator_->placeObject({std::nan(""), 0, 1}, {1, 0, 0, 0}, still, still, &error));
+  EXPECT_FALSE(emulator_->placeObject(target, {1, 0, 0, 0}, {1e3, 0, 0}, still, &error));
+  EXPECT_NE(error.find("max_reset_velocity"), std::string::npos) << error;
+  for (int k = 0; k < 3; ++k) emulator_->tick();
+  EXPECT_NEAR(placedObjectPosition(*emulator_)[0], target[0], 0.005);  // a refusal moves nothing
+
+  EmulatorConfig arm = config();  // no object in this scene
+  arm.bus_paths.clear();
+  for (const char* bus : {"p2", "a0", "a1", "a2"}) arm.bus_paths.push_back(dir_ + "/" + bus);
+  HardwareEmulator no_object(arm);
+  EXPECT_FALSE(no_object.placeObject(target, {1, 0, 0, 0}, still, still, &error));
+  EXPECT_NE(error.find("no free body"), std::string::npos) << error;
+}
+
+TEST_F(Emulator, PlaceObjectInRealTimeWaitsForTheSteppingThreadsVerdict) {
+  EmulatorConfig c = config();
+  c.sim = simConfig("bottle");
+  c.realtime = true;
+  make(c);
+  const std::array<double, 3> target{-0.3, 0.4, 1.2}, up{0, 0, 0.3}, still{0, 0, 0};
+  std::string error;
+  ASSERT_TRUE(emulator_->placeObject(target, {1, 0, 0, 0}, up, still, &error)) << error;
+  std::this_thread::sleep_for(std::chrono::milliseconds(40));
+  const auto p = placedObjectPosition(*emulator_);
+  EXPECT_NEAR(p[0], target[0], 0.01);
+  EXPECT_NEAR(p[1], target[1], 0.01);
+  EXPECT_NEAR(p[2], target[2], 0.03);  // thrown up at 0.3 m/s: within 1 cm over 40 ms, plus scheduling
+  EXPECT_FALSE(emulator_->placeObject(target, {1, 0, 0, 0}, still, {0, 1e3, 0}, &error));  // the thread's verdict
+  EXPECT_NE(error.find("angular velocity"), std::string::npos) << error;
+}
+
 }  // namespace
 }  // namespace adroit::driver::can

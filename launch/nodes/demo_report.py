@@ -12,7 +12,12 @@ for ~drop_hold seconds and lets it fall, watches it for ~watch seconds and repor
 above ~min_height, ended within ~tolerance of the goal); the states are recorded from the
 drop on. Exit status 0 when the stack ran sound: the MPC planned and the driver never entered
 its safe state (watchdog, e-stop, fault). ~pause_at_end: pause the driver (/adroit/pause)
-once the report is printed. Whether the bottle is caught in real time depends
+(the robot: /adroit/estop) once the report is printed.
+
+On the robot (hardware.launch; ~driver adroit_hw) the same run: the driver starts in its safe
+state (start_in_safe_state) and ~start_with estop_release releases it where the simulation is
+unpaused, and the bottle is placed through ~place_service (the emulator's
+/adroit_can_emulator/set_object_pose stands in for a person's hand). Whether the bottle is caught in real time depends
 on the planning latency this machine allows; it is printed, and mpc_success measures it."""
 import math
 import sys
@@ -22,7 +27,7 @@ from adroit_msgs.msg import ForceReference, TendonForceCommand, ValveCommand
 from adroit_msgs.srv import SetObjectPose, SetObjectPoseRequest
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
-from std_srvs.srv import SetBool
+from std_srvs.srv import SetBool, Trigger
 from sensor_msgs.msg import JointState
 
 OBJECT_COLUMNS = ["object_root:" + f for f in ("x", "y", "z", "qw", "qx", "qy", "qz")]
@@ -34,6 +39,7 @@ class DemoReport:
         self.settle = float(rospy.get_param("~settle", 2.0))  # ignore the start-up transient
         self.joint_min, self.joint_max = {}, {}
         self.driver_status = {}
+        self.driver = rospy.get_param("~driver", "adroit_sim")  # its diagnostics, its parameters
         self.start = None
         self.states_csv = rospy.get_param("~states_csv", "")
         self.states_period = 1.0 / float(rospy.get_param("~states_rate", 20.0))
@@ -90,7 +96,7 @@ class DemoReport:
 
     def on_diagnostics(self, msg):
         for status in msg.status:
-            if status.name == "adroit_sim":
+            if status.name == self.driver:
                 self.driver_status = {kv.key: kv.value for kv in status.values}
 
     def report(self):
@@ -121,10 +127,11 @@ def run_catch(node, wait):
     watch = float(rospy.get_param("~watch", 3.0))
     tolerance = float(rospy.get_param("~tolerance", 0.03))
     min_height = float(rospy.get_param("~min_height", 0.2))
-    # demo.launch starts the driver paused for the catch: start it once the pools command
-    # (force mode has no pools: once the MPC is up).
+    # demo.launch starts the driver paused (the robot: in its safe state) for the catch: start
+    # it once the pools command (force mode has no pools: once the MPC is up).
+    pneumatic = rospy.get_param(f"/{node.driver}/mode", "pneumatic") == "pneumatic"
     try:
-        if rospy.get_param("/adroit_sim/mode", "pneumatic") == "pneumatic":
+        if pneumatic:
             rospy.wait_for_message("/adroit/valve_command", ValveCommand, timeout=wait)
         else:
             rospy.wait_for_service("/adroit/mpc/set_task", timeout=wait)
@@ -132,18 +139,30 @@ def run_catch(node, wait):
         print("demo_report: the pools (or the MPC) did not come up", file=sys.stderr)
         return None
     rospy.sleep(1.0)
-    rospy.wait_for_service("/adroit/pause", timeout=10)
-    rospy.ServiceProxy("/adroit/pause", SetBool)(False)
+    if rospy.get_param("~start_with", "pause") == "estop_release":
+        # The operator's release: it also clears whatever latched meanwhile; say what that was.
+        fault = node.driver_status.get("fault", "")
+        if fault:
+            print(f"demo_report: the release also clears a fault latched during start-up: {fault}", file=sys.stderr)
+        rospy.wait_for_service("/adroit/estop_release", timeout=10)
+        response = rospy.ServiceProxy("/adroit/estop_release", Trigger)()
+        if not response.success:
+            print("demo_report: estop_release refused: " + response.message, file=sys.stderr)
+            return None
+    else:
+        rospy.wait_for_service("/adroit/pause", timeout=10)
+        rospy.ServiceProxy("/adroit/pause", SetBool)(False)
     try:  # the MPC's output: force references to the pools, or tendon forces to the driver
-        if rospy.get_param("/adroit_sim/mode", "pneumatic") == "pneumatic":
+        if pneumatic:
             rospy.wait_for_message("/adroit/force_reference", ForceReference, timeout=wait)
         else:
             rospy.wait_for_message("/adroit/tendon_force_command", TendonForceCommand, timeout=wait)
     except rospy.ROSException:
         print("demo_report: the behaviour MPC published nothing", file=sys.stderr)
         return None
-    rospy.wait_for_service("/adroit/set_object_pose", timeout=10)
-    place = rospy.ServiceProxy("/adroit/set_object_pose", SetObjectPose)
+    place_service = rospy.get_param("~place_service", "/adroit/set_object_pose")
+    rospy.wait_for_service(place_service, timeout=10)
+    place = rospy.ServiceProxy(place_service, SetObjectPose)
 
     def put(z):
         request = SetObjectPoseRequest()
@@ -207,13 +226,16 @@ if __name__ == "__main__":
         moved = node.report()
         ok = moved > 0
     if rospy.get_param("~pause_at_end", False):
-        # Stop the simulation from this node, already up, rather than from a new process
-        # whose start-up load on the two cores once delayed the pools' commands past the
-        # driver's watchdog after the report.
+        # Stop the simulation (the robot: e-stop it, valves exhausted) from this node, already
+        # up, rather than from a new process whose start-up load on the two cores once delayed
+        # the pools' commands past the driver's watchdog after the report.
         try:
-            rospy.ServiceProxy("/adroit/pause", SetBool)(True)
+            if node.driver == "adroit_sim":
+                rospy.ServiceProxy("/adroit/pause", SetBool)(True)
+            else:
+                rospy.ServiceProxy("/adroit/estop", Trigger)()
         except (rospy.ServiceException, rospy.ROSException) as e:
-            print(f"demo_report: could not pause the driver: {e}", file=sys.stderr)
+            print(f"demo_report: could not stop the driver: {e}", file=sys.stderr)
     node.write_states()
     rospy.signal_shutdown("demo finished")
     sys.exit(0 if ok else 1)

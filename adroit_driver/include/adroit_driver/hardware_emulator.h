@@ -174,6 +174,16 @@ class HardwareEmulator {
   // connection stays ignored until the host reconnects.
   void clearFaults();
 
+  // The lab's hand placing the object (a person on the real robot; demos and tests here): the
+  // free object's world pose (quaternion w x y z) and velocity, checked and applied as
+  // SimulatedRobot::setObjectPose does, by the stepping thread before its next step. In real
+  // time it waits for that step (at most `timeout` seconds) and returns its verdict; with
+  // realtime = false, or before start(), it applies at once (from the thread that calls tick()).
+  // False with a one-line reason: no object in the scene, a bad pose or velocity, no step in time.
+  bool placeObject(const std::array<double, 3>& position, const std::array<double, 4>& quaternion,
+                   const std::array<double, 3>& linear, const std::array<double, 3>& angular, std::string* error,
+                   double timeout = 0.5);
+
   // The same by text, as the node's service takes them (adroit_msgs/InjectFault): fault is
   // drop | corrupt | delay | stuck_sensor | silence | bus_off | disconnect | board_fault |
   // button | clear. Targets: a bus name ("" = every bus), a cylinder name, a node ("palm",

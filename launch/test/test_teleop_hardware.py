@@ -1,0 +1,49 @@
+#!/usr/bin/python3
+"""Glove teleop on the robot's stack (teleop.launch robot:=emulated): with the dead-man pressed
+the teleop node's force references reach the pools, whose valve commands move the emulated
+robot's fingers after the calibrated glove targets (the same criterion as on the simulation,
+test_teleop.py), and the robot never enters its safe state."""
+import os
+import sys
+import time
+import unittest
+
+import rospy
+import rostest
+from adroit_msgs.msg import ForceReference
+from std_msgs.msg import Bool
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # catkin's relay runs this file from devel
+from test_teleop import FOLLOWED, Recorder, interpolate  # noqa: E402
+
+
+class TeleopHardware(unittest.TestCase):
+    def test_the_glove_moves_the_emulated_robot(self):
+        rec = Recorder()
+        references = []
+        rospy.Subscriber("/adroit/force_reference", ForceReference, lambda m: references.append(time.monotonic()))
+        rospy.wait_for_message("/adroit/joint_states", rospy.AnyMsg, timeout=60)
+        rospy.wait_for_message("/adroit/force_reference", ForceReference, timeout=60)
+        start = time.monotonic()
+        time.sleep(7.0)
+        self.assertGreater(len([t for t in references if t > start]) / 7.0, 100, "force references below the glove rate")
+        targets = rec.since(rec.targets, start + 1.0)
+        joints = rec.since(rec.joints, start + 0.5)
+        for j in FOLLOWED:
+            errors, wanted = [], []
+            for target in targets[::10]:
+                want = dict(zip(target.name, target.position))[j]
+                have = interpolate(joints, target.header.stamp + rospy.Duration(0.1))[j]
+                errors.append(have - want)
+                wanted.append(want)
+            rms = (sum(e * e for e in errors) / len(errors)) ** 0.5
+            swept = max(wanted) - min(wanted)
+            self.assertGreater(swept, 0.5, "%s: the glove target hardly moved (%.2f rad)" % (j, swept))
+            self.assertLess(rms, 0.2 * swept, "%s: rms error %.3f rad over a sweep of %.2f rad" % (j, rms, swept))
+            print("%s: rms error %.1f deg over a sweep of %.0f deg" % (j, rms * 57.3, swept * 57.3))
+        self.assertNotIn(True, [m.data for m in rec.since(rec.safe, start)], "the robot entered its safe state")
+
+
+if __name__ == "__main__":
+    rospy.init_node("test_teleop_hardware")
+    rostest.rosrun("adroit_launch", "teleop_hardware", TeleopHardware)

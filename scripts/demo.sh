@@ -66,9 +66,12 @@ mkdir -p "$out_dir"
 rm -f "$out_dir"/states.csv "$out_dir"/frame_*.ppm "$out_dir"/forces.bag "$out_dir"/forces.bag.active
 set +e
 scene="$(rosparam get "/$driver/scene" 2>/dev/null)"
+# The least tension the robot applies and reports (the simulation's slack-avoiding minimum; the
+# hardware reports what the pressure pulls): the force audit's floors pull it too.
+min_tension="$(rosparam get "/$driver/min_tension" 2>/dev/null || echo 0)"
 # The pools' input and output for the force-tracking audit below (a real rosbag; SIGINT
 # closes it cleanly).
-rosbag record -q -O "$out_dir/forces.bag" /adroit/actuator_states /adroit/force_reference \
+rosbag record -q -O "$out_dir/forces.bag" /adroit/actuator_states /adroit/force_reference /adroit/valve_command /adroit/diagnostics \
   __name:=demo_force_bag >/dev/null 2>&1 &
 bag_pid=$!
 rosrun adroit_launch demo_report.py "${report_args[@]}" _states_csv:="$out_dir/states.csv" _pause_at_end:=true
@@ -87,7 +90,7 @@ trap - EXIT
 if [ -s "$out_dir/forces.bag" ] && [ -n "$scene" ]; then
   echo
   rosrun adroit_pneumatics force_tracking_audit --bag "$out_dir/forces.bag" --scene "$scene" \
-    --csv "$out_dir/forces.csv" || echo "demo: no force-tracking audit (no force references recorded)" >&2
+    --min-tension "$min_tension" --csv "$out_dir/forces.csv" || echo "demo: no force-tracking audit (no force references recorded)" >&2
 fi
 
 # Six frames over the recorded run, drawn offscreen (a hidden GLFW window on a virtual display).

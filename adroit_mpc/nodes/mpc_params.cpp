@@ -68,7 +68,8 @@ MpcParams readParams(const ros::NodeHandle& pnh) {
   std::set<std::string> keys = {"scene", "model_file", "task", "tasks", "planner", "mode", "threads", "horizon", "dt",
                                  "iterations", "synergies", "derivative_skip", "samples", "noise_scale",
                                  "control_rate", "state_timeout", "feedback_scale", "marker_rate",
-                                 "diagnostics_period", "nice", "control_priority", "lockstep", "physics_timestep", "lockstep_controls_per_plan"};
+                                 "diagnostics_period", "nice", "control_priority", "lockstep", "physics_timestep", "lockstep_controls_per_plan",
+                                 "min_tension"};
   // dynamic_reconfigure keeps its values (task weights) among the private parameters too.
   for (const auto& d : adroit_mpc::MpcConfig::__getParamDescriptions__()) keys.insert(d->name);
   p.checkKeys("", keys);
@@ -116,6 +117,7 @@ MpcParams readParams(const ros::NodeHandle& pnh) {
   out.lockstep = p.boolean("lockstep", out.lockstep);
   out.physics_timestep = p.number("physics_timestep", out.physics_timestep, 1e-5, 0.1);
   out.lockstep_controls_per_plan = p.integer("lockstep_controls_per_plan", out.lockstep_controls_per_plan, 1, 1000);
+  out.min_tension = p.number("min_tension", out.min_tension, 0.0, 5.0);
 
   return out;
 }

@@ -29,6 +29,7 @@ void sizeSnapshot(StateSnapshot& s, const mjModel* m) {
 adroit_mpc::PlanningModelSettings planningSettings(const MpcParams& p) {
   adroit_mpc::PlanningModelSettings s;
   s.timestep = p.settings.dt;
+  s.min_tension = p.min_tension;
   if (p.task == "type") s.contact_margin = 0.001, s.contact_softness = 0.001;
   return s;
 }

@@ -76,6 +76,7 @@ struct MpcParams {
   bool lockstep = false;
   double physics_timestep = 0.002;  // s, the driver's step
   int lockstep_controls_per_plan = 4;  // control periods stepped between two optimisations
+  double min_tension = 0.3;             // N, the planning model's lower tendon force (PlanningModelSettings)
   std::map<std::string, adroit_mpc::TaskParams> tasks;  // ~tasks/<name>/...
 };
 

@@ -33,6 +33,16 @@ void applyPlanningSettings(mjModel* m, const PlanningModelSettings& s) {
   if (s.solver_iterations < 0)
     throw std::invalid_argument("planning model: solver_iterations must be >= 0, got " +
                                 std::to_string(s.solver_iterations));
+  if (!(s.min_tension >= 0) || !std::isfinite(s.min_tension))
+    throw std::invalid_argument("planning model: min_tension must be >= 0, got " + std::to_string(s.min_tension));
+  for (int a = 0; a < m->nu; ++a) {
+    mjtNum* range = m->actuator_ctrlrange + 2 * a;
+    if (m->actuator_trntype[a] != mjTRN_TENDON || !m->actuator_ctrllimited[a]) continue;
+    if (s.min_tension > range[1])
+      throw std::invalid_argument("planning model: min_tension " + std::to_string(s.min_tension) +
+                                  " N is above actuator " + std::to_string(a) + "'s upper bound");
+    range[0] = std::max(range[0], s.min_tension);
+  }
   m->opt.timestep = s.timestep;
   if (s.solver_iterations > 0) m->opt.iterations = s.solver_iterations;
   if (s.disable_sensors) m->opt.disableflags |= mjDSBL_SENSOR;

@@ -84,6 +84,27 @@ TEST(PlanningModel, ObjectOverridesScaleMassAndSize) {
   EXPECT_NEAR(m->body_inertia[3 * body], ratio * base->body_inertia[3 * body], 1e-12);
 }
 
+TEST(PlanningModel, TendonForcesStartAtTheRobotsMinimumTension) {
+  PlanningModelSettings s;
+  s.min_tension = 0;
+  auto physical = loadPlanningModel(bottleFile(), s);
+  s.min_tension = 0.3;
+  auto m = loadPlanningModel(bottleFile(), s);
+  int tendons = 0;
+  for (int a = 0; a < m->nu; ++a) {
+    if (m->actuator_trntype[a] != mjTRN_TENDON) continue;
+    ++tendons;
+    ASSERT_LT(physical->actuator_ctrlrange[2 * a], 0.3) << a;  // the description's bound is below it
+    EXPECT_EQ(m->actuator_ctrlrange[2 * a], 0.3) << a;
+    EXPECT_EQ(m->actuator_ctrlrange[2 * a + 1], physical->actuator_ctrlrange[2 * a + 1]) << a;
+  }
+  EXPECT_GE(tendons, 20);
+  s.min_tension = 1e4;  // above every upper bound
+  EXPECT_THROW(loadPlanningModel(bottleFile(), s), std::invalid_argument);
+  s.min_tension = -1;
+  EXPECT_THROW(loadPlanningModel(bottleFile(), s), std::invalid_argument);
+}
+
 TEST(PlanningModel, BadSettingsAreRejectedWithTheirName) {
   PlanningModelSettings s;
   s.timestep = 0;

@@ -1,21 +1,23 @@
 // force_tracking_audit: the pools' force tracking in a recorded run, next to the plant's
 // floor (ForceTrackingAudit, tracking_floor.h), per group of cylinders.
 //   force_tracking_audit --bag run.bag [--model scene.xml | --scene arm_hand] [--limit 2.0]
-//                        [--csv out.csv]
+//                        [--min-tension 0.3] [--csv out.csv]
 // The bag holds /adroit/actuator_states and /adroit/force_reference (e.g. `rosbag record`
 // beside a bringup; scripts/demo.sh records one). At every actuator state after the first
-// reference, the desired tension of each cylinder is the newest reference interpolated at
-// the state's stamp, as the pools take it; states outside that reference's span are
-// skipped. The floors start from the first audited state's pressures and follow each
+// reference, the desired tension of each cylinder is the newest reference stamped at or
+// before the state (by stamp, not by arrival at the recorder), interpolated at the state's
+// stamp, as the pools take it; states outside that reference's span are skipped. The floors start from the first audited state's pressures and follow each
 // cylinder's recorded piston travel and supply; --limit is the pools' command limit (V,
-// config/pools.yaml ilqg/u_max). --csv writes time, desired and measured tension and the
-// per-sample floor's tension per cylinder.
+// config/pools.yaml ilqg/u_max); --min-tension the least tension the robot applies and
+// reports (the simulation driver's ~min_tension; default 0), which the floors then pull too. --csv writes time, desired and measured tension and the
+// per-sample floor's tension per cylinder (time in seconds from the first audited state).
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
 #include <fstream>
+#include <iomanip>
 #include <map>
 #include <stdexcept>
 #include <string>
@@ -38,7 +40,8 @@ using namespace adroit::pneumatics;
 namespace {
 
 constexpr const char* kUsage =
-    "usage: force_tracking_audit --bag run.bag [--model f.xml | --scene arm_hand] [--limit 2.0] [--csv out.csv]\n";
+    "usage: force_tracking_audit --bag run.bag [--model f.xml | --scene arm_hand] [--limit 2.0] [--min-tension 0.3]\n"
+    "                            [--csv out.csv]\n";
 
 // The reference's value for column j at time t (linear between samples), NaN outside it.
 double desiredAt(const adroit_msgs::ForceReference& ref, std::size_t j, double t) {
@@ -90,7 +93,7 @@ double latencyEquivalent(const std::vector<std::vector<double>>& desired, const 
 
 int main(int argc, char** argv) {
   std::string bag_path, model_file, scene = "arm_hand", csv_path;
-  double limit = 2.0;
+  double limit = 2.0, min_tension = 0.0;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (i + 1 >= argc) {
@@ -103,12 +106,13 @@ int main(int argc, char** argv) {
     else if (a == "--scene") scene = v;
     else if (a == "--csv") csv_path = v;
     else if (a == "--limit") limit = std::atof(v.c_str());
+    else if (a == "--min-tension") min_tension = std::atof(v.c_str());
     else {
       std::fprintf(stderr, "force_tracking_audit: unknown argument %s\n%s", a.c_str(), kUsage);
       return 2;
     }
   }
-  if (bag_path.empty() || !(limit > 0)) {
+  if (bag_path.empty() || !(limit > 0) || !(min_tension >= 0) || !std::isfinite(min_tension)) {
     std::fprintf(stderr, "%s", kUsage);
     return 2;
   }
@@ -131,17 +135,29 @@ int main(int argc, char** argv) {
     // for the latency equivalent of the excess below.
     std::vector<double> times;
     std::vector<std::vector<double>> desired_log, floor_log;
-    double last_t = 0;
+    double last_t = 0, first_t = 0;
     std::size_t states = 0, audited = 0, skipped = 0, references = 0, bad_references = 0;
+    // The recorder receives references late and in bursts when the machine is busy (the MPC
+    // publishes one per control period): the pools had each from about its stamp on. So each
+    // state is paired with the newest reference stamped at or before it, not the newest the
+    // bag happened to hold.
+    std::vector<adroit_msgs::ForceReference::ConstPtr> reference_msgs;
+    std::vector<adroit_msgs::ActuatorStates::ConstPtr> state_msgs;
     for (const rosbag::MessageInstance& m : view) {
       if (auto r = m.instantiate<adroit_msgs::ForceReference>()) {
-        if (!usable(*r)) {
-          ++bad_references;
-          continue;
-        }
-        ++references;
-        ref = r;
-        if (audit) continue;
+        if (usable(*r)) reference_msgs.push_back(r);
+        else ++bad_references;
+      } else if (auto s = m.instantiate<adroit_msgs::ActuatorStates>()) {
+        state_msgs.push_back(s);
+      }
+    }
+    references = reference_msgs.size();
+    const auto by_stamp = [](const auto& a, const auto& b) { return a->header.stamp < b->header.stamp; };
+    std::stable_sort(reference_msgs.begin(), reference_msgs.end(), by_stamp);
+    std::stable_sort(state_msgs.begin(), state_msgs.end(), by_stamp);
+    if (!reference_msgs.empty()) {
+      const auto& r = reference_msgs.front();
+      {
         std::vector<ForceTrackingAudit::Cylinder> cylinders;
         for (const std::string& n : r->name) {
           const auto c = std::find_if(table.begin(), table.end(), [&](const auto& x) { return x.name == n; });
@@ -156,6 +172,7 @@ int main(int argc, char** argv) {
         }
         if (names.empty()) throw std::runtime_error("the first force reference names no cylinder of " + model_file);
         audit = std::make_unique<ForceTrackingAudit>(std::move(cylinders), limit, PlantOptions{}.tube_delay);
+        audit->setMinTension(min_tension);
         if (!csv_path.empty()) {
           csv.open(csv_path);
           if (!csv) throw std::runtime_error("--csv: cannot write " + csv_path);
@@ -165,11 +182,13 @@ int main(int argc, char** argv) {
           for (const auto& n : names) csv << ',' << n << ":floor_per_sample";
           csv << '\n';
         }
-        continue;
       }
-      auto s = m.instantiate<adroit_msgs::ActuatorStates>();
-      if (!s) continue;
+    }
+    std::size_t next_reference = 0;
+    for (const auto& s : state_msgs) {
       ++states;
+      while (next_reference < reference_msgs.size() && reference_msgs[next_reference]->header.stamp <= s->header.stamp)
+        ref = reference_msgs[next_reference++];
       if (!audit || !ref) continue;
       const std::size_t n = s->name.size();
       if (s->pressure.size() != n || s->length.size() != n || s->length_rate.size() != n || s->force.size() != n ||
@@ -214,7 +233,8 @@ int main(int argc, char** argv) {
       last_t = t;
       ++audited;
       if (csv.is_open()) {
-        csv << t;
+        if (audited == 1) first_t = t;
+        csv << std::fixed << std::setprecision(4) << t - first_t << std::defaultfloat << std::setprecision(6);
         for (double v : desired) csv << ',' << v;
         for (double v : tension) csv << ',' << v;
         for (std::size_t j = 0; j < k; ++j)
@@ -229,8 +249,9 @@ int main(int argc, char** argv) {
                 bag_path.c_str(), audited, skipped, references, bad_references);
     std::printf("measured vs desired tendon tension, RMSE in N, next to the plant's floor: a cylinder racing at the\n"
                 "command limit (+-%.1f V) to each new desired value after the plant's %.0f ms tube delay and stopping\n"
-                "on it exactly, and per sample: one command per state sample, chosen with an exact model\n",
-                limit, PlantOptions{}.tube_delay * 1e3);
+                "on it exactly, and per sample: one command per state sample, chosen with an exact model; the robot's\n"
+                "minimum tension %.2f N bounds measured and floors alike\n",
+                limit, PlantOptions{}.tube_delay * 1e3, min_tension);
     std::printf("  %-6s %7s %7s %10s %10s %8s %9s\n", "group", "RMSE", "floor", "per sample", "RMSE/floor", "max ref",
                 "as delay");
     const double spacing = times.size() > 1 ? (times.back() - times.front()) / static_cast<double>(times.size() - 1) : 0;

@@ -116,6 +116,12 @@ ForceTrackingAudit::ForceTrackingAudit(std::vector<Cylinder> cylinders, double l
   }
 }
 
+void ForceTrackingAudit::setMinTension(double newtons) {
+  if (!(newtons >= 0) || !std::isfinite(newtons))
+    throw std::invalid_argument("ForceTrackingAudit: min tension must be finite and >= 0");
+  min_tension_ = newtons;
+}
+
 void ForceTrackingAudit::start(const std::vector<double>& pressure) {
   for (std::size_t j = 0; j < cylinders_.size(); ++j) {
     const double p = j < pressure.size() && std::isfinite(pressure[j]) ? pressure[j] : room_;
@@ -134,8 +140,8 @@ void ForceTrackingAudit::add(double dt, const std::vector<double>& reference, co
     if (!std::isfinite(reference[j]) || !std::isfinite(tension[j])) continue;
     const double area = cylinders_[j].spec.bore_area, want = std::max(0.0, reference[j]);
     const double p_ref = room_ + want / area;
-    // Tension is pull only: a chamber below the room pressure pulls nothing.
-    const auto pull = [&](double p) { return std::max(0.0, (p - room_) * area); };
+    // Tension is pull only: a chamber below the room pressure pulls nothing (or the minimum).
+    const auto pull = [&](double p) { return std::max(min_tension_, (p - room_) * area); };
     const double floor = pull(floors_[j].step(p_ref, dt, volume[j], volume_rate[j], supply));
     const double tick = pull(ticks_[j].step(p_ref, dt, volume[j], volume_rate[j], supply));
     last_tick_tension_[j] = tick;

@@ -113,3 +113,25 @@ TEST(ForceTrackingAudit, SumsPerGroup) {
   EXPECT_DOUBLE_EQ(groups.at("FF").max_reference, 20.0);
   EXPECT_THROW(ForceTrackingAudit({{"FF", CylinderSpec{}}}, kLimit, 0.0), std::invalid_argument);
 }
+
+TEST(ForceTrackingAudit, AReferenceBelowTheRobotsMinimumTensionCountsAgainstTheFloorsToo) {
+  const CylinderSpec spec = cylinderSpec("M9");
+  const double v = spec.dead_volume + 0.5 * spec.bore_area * spec.stroke;
+  const auto run = [&](double min_tension) {
+    ForceTrackingAudit audit({{"FF", spec}}, kLimit, 0.002);
+    audit.setMinTension(min_tension);
+    audit.start({constants::kAtmosphere});
+    // Asked for nothing; the robot applies (and reports) its minimum.
+    for (int k = 0; k < 40; ++k) audit.add(kDt, {0.0}, {0.3}, {v}, {0}, 620e3);
+    return audit.groups().at("FF");
+  };
+  const auto without = run(0.0), with = run(0.3);
+  EXPECT_NEAR(without.rmse, 0.3, 1e-12);
+  EXPECT_LT(without.per_tick, 0.2);  // a chamber held near the room pressure pulls (almost) nothing
+  EXPECT_NEAR(with.rmse, 0.3, 1e-12);
+  EXPECT_NEAR(with.per_tick, 0.3, 1e-9);     // ... but the robot's tendon keeps its minimum
+  EXPECT_NEAR(with.floor, 0.3, 1e-9);
+  ForceTrackingAudit audit({{"FF", spec}}, kLimit, 0.002);
+  EXPECT_THROW(audit.setMinTension(-0.1), std::invalid_argument);
+  EXPECT_THROW(audit.setMinTension(std::nan("")), std::invalid_argument);
+}

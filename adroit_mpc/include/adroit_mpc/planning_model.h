@@ -26,6 +26,11 @@ struct PlanningModelSettings {
   int solver_iterations = 0;
   double object_mass = 0;          // kg, body "object" (inertia scaled with it); 0 keeps
   double object_size_scale = 1;    // geometric scale of the object's geoms (inertia ~ s^2)
+  // The robot's slack-avoiding minimum tendon tension (thesis 6.3; the driver's ~min_tension):
+  // the plant never applies less, in force and in pneumatic mode, so each tendon actuator's
+  // lower control bound is raised to it and the planner plans only tensions the robot applies
+  // (the pools are never asked for a tension below what a vented cylinder gives). 0 keeps.
+  double min_tension = 0.3;        // N
 };
 
 // Applies the settings to a compiled model in place. Throws std::invalid_argument with one

@@ -73,6 +73,10 @@ class ForceTrackingAudit {
   ForceTrackingAudit(std::vector<Cylinder> cylinders, double limit, double dead_time,
                      double room = constants::kAtmosphere);
   std::size_t size() const { return cylinders_.size(); }
+  // The least tension the robot applies and reports (the simulation's slack-avoiding
+  // ~min_tension; 0 for a sensor that reads what the pressure pulls): the floors' tensions
+  // are at least this too, so a reference below it counts against both alike. >= 0.
+  void setMinTension(double newtons);
   // Starts the floors at these pressures (Pa) for a new run; the sums go on.
   void start(const std::vector<double>& pressure);
   // One sample dt after the previous one: per cylinder the reference and measured tension
@@ -89,7 +93,7 @@ class ForceTrackingAudit {
     long samples = 0;
   };
   std::vector<Cylinder> cylinders_;
-  double room_;
+  double room_, min_tension_ = 0;
   std::vector<TrackingFloor> floors_, ticks_;
   std::vector<double> last_tick_tension_;
   std::map<std::string, Sums> sums_;

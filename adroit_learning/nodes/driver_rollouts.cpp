@@ -50,6 +50,11 @@ DriverConnection::DriverConnection(ros::NodeHandle& nh, const std::string& ns, d
 }
 
 DriverConnection::~DriverConnection() {
+  // First stop the callbacks: another spinner thread may be inside one, and the members it
+  // writes (the latest messages, the mutex) are destroyed before the subscribers would be.
+  // shutdown() waits for a callback in progress (ASan: heap-use-after-free of the latest
+  // actuator state when execute_policy ended while states still arrived).
+  for (ros::Subscriber* s : {&joints_sub_, &actuators_sub_, &odom_sub_, &safe_sub_}) s->shutdown();
   // Realtime: when the keep-alive ends the driver's command watchdog takes it to its safe
   // state, as it must on hardware. A simulation driver is paused instead (its watchdog runs on
   // its clock), and the next job starts it again.

@@ -1028,46 +1028,22 @@ CommandResult CanRobot::acceptCommand(const CheckedCommand& checked, double t) {
 
 void CanRobot::enterSafeState(SafeCause cause, can::EstopCause estop_cause, int index, int cylinder, FaultSource source,
                               const FaultDetail* detail) {
-  switch (cause) {
-    case SafeCause::kEstop:
-      safety_.estop_latched = true;
-      ++counters_.estops;
-      break;
-    case SafeCause::kWatchdog:
-      safety_.watchdog_latched = true;
-      ++counters_.watchdog_trips;
-      break;
-    case SafeCause::kFault:
-      if (safety_.fault_latched) return;  // one event per entry into the latch
-      safety_.fault_latched = true;
-      ++counters_.faults;
-      break;
-    case SafeCause::kNone: return;
-  }
-  safety_.safe_state = true;
   const double t = clock();
   SafetyEvent event;
-  event.sequence = ++counters_.safety_events;
   event.cause = cause;
   event.clock = t;
   event.cylinder = cylinder;
   event.index = index;
   event.fault = cause == SafeCause::kFault ? source : FaultSource::kNone;
-  events_.last = event;
-  switch (cause) {
-    case SafeCause::kEstop: events_.estop = event; break;
-    case SafeCause::kWatchdog: events_.watchdog = event; break;
-    default: {
-      events_.fault = event;
-      FaultDetail d = detail ? *detail : FaultDetail{};
-      d.sequence = event.sequence;
-      {
-        std::lock_guard<std::mutex> lock(details_mutex_);
-        details_[event.sequence % details_.size()] = d;
-      }
-      safety_.fault = faultText(event, &d);  // formatted once per fault event
-      break;
+  if (!latchSafeState(&event, &safety_, &counters_, &events_)) return;
+  if (cause == SafeCause::kFault) {
+    FaultDetail d = detail ? *detail : FaultDetail{};
+    d.sequence = event.sequence;
+    {
+      std::lock_guard<std::mutex> lock(details_mutex_);
+      details_[event.sequence % details_.size()] = d;
     }
+    safety_.fault = faultText(event, &d);  // formatted once per fault event
   }
   for (ValveGroup& g : groups_) g.pending = false;
   std::fill(applied_command_.begin(), applied_command_.end(), kExhaustVolts);

@@ -32,6 +32,34 @@ CommandResult countCommand(const CheckedCommand& checked, bool safe_state, Count
   return result;
 }
 
+bool latchSafeState(SafetyEvent* event, SafetyStatus* safety, Counters* counters, SafetyEvents* events) {
+  switch (event->cause) {
+    case SafeCause::kEstop:
+      safety->estop_latched = true;
+      ++counters->estops;
+      break;
+    case SafeCause::kWatchdog:
+      safety->watchdog_latched = true;
+      ++counters->watchdog_trips;
+      break;
+    case SafeCause::kFault:
+      if (safety->fault_latched) return false;
+      safety->fault_latched = true;
+      ++counters->faults;
+      break;
+    case SafeCause::kNone: return false;
+  }
+  safety->safe_state = true;
+  event->sequence = ++counters->safety_events;
+  events->last = *event;
+  switch (event->cause) {
+    case SafeCause::kEstop: events->estop = *event; break;
+    case SafeCause::kWatchdog: events->watchdog = *event; break;
+    default: events->fault = *event; break;
+  }
+  return true;
+}
+
 bool Robot::resetToKeyframe(const std::string&, std::string* error) { return refuse("reset", error); }
 bool Robot::resetToState(const std::vector<double>&, const std::vector<double>&, const std::vector<double>&,
                          std::string* error) {

@@ -203,25 +203,7 @@ CommandResult SimulatedRobot::applyForces(const CheckedCommand& checked) {
 // ---------------------------------------------------------------------------- safety
 
 void SimulatedRobot::enterSafeState(SafeCause cause, int cylinder, const FaultSite* fault) {
-  switch (cause) {
-    case SafeCause::kEstop:
-      safety_.estop_latched = true;
-      ++counters_.estops;
-      break;
-    case SafeCause::kWatchdog:
-      safety_.watchdog_latched = true;
-      ++counters_.watchdog_trips;
-      break;
-    case SafeCause::kFault:
-      if (safety_.fault_latched) return;  // one event per entry into the latch, not per step
-      safety_.fault_latched = true;
-      ++counters_.faults;
-      break;
-    case SafeCause::kNone: return;
-  }
-  safety_.safe_state = true;
   SafetyEvent event;
-  event.sequence = ++counters_.safety_events;
   event.cause = cause;
   event.clock = clock_;
   event.cylinder = cylinder;
@@ -235,15 +217,8 @@ void SimulatedRobot::enterSafeState(SafeCause cause, int cylinder, const FaultSi
       event.cylinder = fault->index;
     }
   }
-  events_.last = event;
-  switch (cause) {
-    case SafeCause::kEstop: events_.estop = event; break;
-    case SafeCause::kWatchdog: events_.watchdog = event; break;
-    default:
-      events_.fault = event;
-      safety_.fault = faultText(event);  // formatted once per fault event
-      break;
-  }
+  if (!latchSafeState(&event, &safety_, &counters_, &events_)) return;
+  if (cause == SafeCause::kFault) safety_.fault = faultText(event);  // formatted once per fault event
 }
 
 std::string SimulatedRobot::jointName(int joint) const {

@@ -103,6 +103,13 @@ struct CommandResult {
 // the watchdog), else accepted (and clamped). `applied` in the result: the caller applies it.
 CommandResult countCommand(const CheckedCommand& checked, bool safe_state, Counters* counters);
 
+// Latches a safe-state entry as every robot does: the cause's flag and counter, safe_state,
+// and the event (its cause, clock, cylinder, index and fault filled in by the robot) numbered
+// and filed as the last event and under its cause. False, with nothing changed, for kNone
+// and for a fault while a fault is latched (one event per entry into the latch, not per
+// step); then the robot does nothing else either. The fault text is the robot's to write.
+bool latchSafeState(SafetyEvent* event, SafetyStatus* safety, Counters* counters, SafetyEvents* events);
+
 // One line of robot-specific diagnostics (key, value), e.g. per-bus frame counters.
 using DiagnosticValues = std::vector<std::pair<std::string, std::string>>;
 

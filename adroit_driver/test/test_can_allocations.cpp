@@ -12,18 +12,7 @@
 #include "adroit_driver/can_protocol.h"
 #include "adroit_driver/can_transport.h"
 
-namespace {
-bool g_counting = false;
-std::size_t g_allocations = 0;
-}  // namespace
-
-void* operator new(std::size_t size) {
-  if (g_counting) ++g_allocations;
-  if (void* p = std::malloc(size ? size : 1)) return p;
-  throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+#include "allocation_window.h"
 
 namespace adroit::driver::can {
 namespace {
@@ -36,8 +25,7 @@ TEST(CanAllocations, CodecsTrackerAndTransportAllocateNothing) {
   SequenceTracker tracker;
   Message message;
 
-  g_allocations = 0;
-  g_counting = true;
+  allocation_window::start();
   for (int cycle = 0; cycle < 100; ++cycle) {
     const auto seq = static_cast<std::uint8_t>(cycle);
     CanFrame f;
@@ -57,8 +45,7 @@ TEST(CanAllocations, CodecsTrackerAndTransportAllocateNothing) {
     const ReadResult r = b.read(in, 8, std::chrono::milliseconds(100));
     ASSERT_EQ(r.count, 6u);
   }
-  g_counting = false;
-  EXPECT_EQ(g_allocations, 0u);
+  EXPECT_EQ(allocation_window::stop(), 0u);
 }
 
 }  // namespace

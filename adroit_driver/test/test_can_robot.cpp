@@ -18,24 +18,7 @@
 
 #include "adroit_driver/can_robot.h"
 
-// Counts the calls of the global operator new while a test holds a counting window (the
-// robot's step and accepted commands must allocate nothing).
-namespace {
-bool g_counting = false;
-std::size_t g_allocations = 0;
-}  // namespace
-
-void* operator new(std::size_t size) {
-  if (g_counting) ++g_allocations;
-  if (void* p = std::malloc(size ? size : 1)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t size) { return operator new(size); }
-// Not inlined: GCC would then see malloc's memory freed through a "delete" and warn.
-[[gnu::noinline]] void operator delete(void* p) noexcept { std::free(p); }
-[[gnu::noinline]] void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-[[gnu::noinline]] void operator delete[](void* p) noexcept { std::free(p); }
-[[gnu::noinline]] void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+#include "allocation_window.h"  // the robot's step and accepted commands must allocate nothing
 
 namespace adroit::driver {
 namespace {
@@ -1032,13 +1015,11 @@ TEST_F(CanRobotTest, StepsAndAcceptedCommandsAllocateNothing) {
   const CheckedCommand checked = robot_->checkValves({}, {0, 1, 20, 40}, {0.5, -0.5, 1.0, 2.0});
   std::size_t allocations = 0;
   run(0.3, [&] {  // streaming, commanding, heartbeats, kinematics; the robot's calls counted
-    g_allocations = 0;
-    g_counting = true;
+    allocation_window::start();
     if (boards_.tick % 3 == 0) robot_->applyValves(checked);
     robot_->step();
     robot_->takeFresh();
-    g_counting = false;
-    allocations += g_allocations;
+    allocations += allocation_window::stop();
   });
   EXPECT_EQ(allocations, 0u);
   EXPECT_FALSE(robot_->safety().safe_state);

@@ -61,6 +61,7 @@ CanRobotConfig readCanRobotConfig(const rosutil::Params& p) {
   c.length_rate_cutoff = p.number("length_rate_cutoff", c.length_rate_cutoff);
   c.supply_pressure = p.number("supply_pressure", c.supply_pressure);
   c.joint_period = p.number("joint_period", c.joint_period);
+  c.silent_periods = p.integer("silent_periods", c.silent_periods, 3, 20);
   c.sensor_period = p.number("sensor_period", c.sensor_period);
   const std::string invalid = validate(c);
   if (!invalid.empty()) throw ParameterError("bad parameter " + invalid);

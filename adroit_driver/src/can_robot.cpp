@@ -139,6 +139,8 @@ std::string validate(const CanRobotConfig& c) {
     return describeBad("~joint_period", "in (0, 0.1] s", c.joint_period);
   if (!positiveFinite(c.sensor_period) || c.sensor_period > 0.1)
     return describeBad("~sensor_period", "in (0, 0.1] s", c.sensor_period);
+  if (c.silent_periods < 3 || c.silent_periods > 20)
+    return describeBad("~silent_periods", "in [3, 20]", c.silent_periods);
   if (!positiveFinite(c.joint_velocity_cutoff) || c.joint_velocity_cutoff > 0.5 / c.joint_period)
     return describeBad("~joint_velocity_cutoff", "in (0, " + format(0.5 / c.joint_period) + "] Hz (Nyquist)",
                        c.joint_velocity_cutoff);

@@ -762,6 +762,27 @@ TEST_F(CanRobotTest, ASilentStreamIsAFaultNamingIt) {
   EXPECT_FALSE(robot_->safety().safe_state);
 }
 
+TEST_F(CanRobotTest, SilentPeriodsSetsHowLongAStreamMayPause) {
+  CanRobotConfig c = boards_.config();
+  c.silent_periods = 10;  // boards played on the same machine (hardware.launch emulate:=true)
+  start(c);
+  run(0.02);
+  boards_.muted.insert(can::kJointAnglesIdBase);  // the palm's joints 0..3, 2 ms period
+  const double muted = robot_->clock();
+  run(0.016);  // 8 periods: a pause, not yet a fault
+  EXPECT_FALSE(robot_->safety().fault_latched);
+  run(0.01);
+  ASSERT_TRUE(robot_->safety().fault_latched);
+  const SafetyEvent& e = robot_->safetyEvents().fault;
+  EXPECT_EQ(e.index, static_cast<int>(can::kJointAnglesIdBase));
+  EXPECT_GE(e.clock - muted, 0.018);  // 10 periods after the last frame
+  EXPECT_LE(e.clock - muted, 0.020 + 0.002 + 0.001 + 1e-9);
+  for (int bad : {2, 21}) {
+    c.silent_periods = bad;
+    EXPECT_NE(validate(c).find("~silent_periods"), std::string::npos) << bad;
+  }
+}
+
 TEST_F(CanRobotTest, AStallOfTheDriverIsNotSilenceOfTheBuses) {
   start();
   run(0.02);

@@ -128,6 +128,7 @@ void ForceTrackingAudit::start(const std::vector<double>& pressure) {
     floors_[j].reset(p);
     ticks_[j].reset(p);
   }
+  given_.assign(cylinders_.size(), std::nan(""));
 }
 
 void ForceTrackingAudit::add(double dt, const std::vector<double>& reference, const std::vector<double>& tension,
@@ -136,14 +137,18 @@ void ForceTrackingAudit::add(double dt, const std::vector<double>& reference, co
   const std::size_t n = std::min({cylinders_.size(), reference.size(), tension.size(), volume.size(),
                                   volume_rate.size()});
   last_tick_tension_.assign(cylinders_.size(), std::nan(""));
+  given_.resize(cylinders_.size(), std::nan(""));
   for (std::size_t j = 0; j < n; ++j) {
     if (!std::isfinite(reference[j]) || !std::isfinite(tension[j])) continue;
     const double area = cylinders_[j].spec.bore_area, want = std::max(0.0, reference[j]);
-    const double p_ref = room_ + want / area;
     // Tension is pull only: a chamber below the room pressure pulls nothing (or the minimum).
     const auto pull = [&](double p) { return std::max(min_tension_, (p - room_) * area); };
-    const double floor = pull(floors_[j].step(p_ref, dt, volume[j], volume_rate[j], supply));
-    const double tick = pull(ticks_[j].step(p_ref, dt, volume[j], volume_rate[j], supply));
+    // Causal: a controller learns of this sample's reference now, so over the interval that
+    // ends now the floors act on the one given at the previous sample (a reference that
+    // changes at this sample is met at the next one at the earliest, as by the robot).
+    const double floor = pull(floors_[j].step(given_[j], dt, volume[j], volume_rate[j], supply));
+    const double tick = pull(ticks_[j].step(given_[j], dt, volume[j], volume_rate[j], supply));
+    given_[j] = room_ + want / area;
     last_tick_tension_[j] = tick;
     Sums& s = sums_[cylinders_[j].group];
     s.error += (tension[j] - want) * (tension[j] - want);
@@ -159,6 +164,59 @@ std::map<std::string, ForceTrackingAudit::Group> ForceTrackingAudit::groups() co
   for (const auto& [name, s] : sums_) {
     const double n = static_cast<double>(std::max(1L, s.samples));
     out[name] = {std::sqrt(s.error / n), std::sqrt(s.floor / n), std::sqrt(s.per_tick / n), s.max_reference, s.samples};
+  }
+  return out;
+}
+
+PreviewAudit::PreviewAudit(std::vector<std::string> groups, std::vector<double> leads)
+    : groups_(std::move(groups)), leads_(std::move(leads)) {
+  for (double lead : leads_)
+    if (!(lead >= 0) || !std::isfinite(lead)) throw std::invalid_argument("PreviewAudit: leads must be finite and >= 0");
+  for (const std::string& g : groups_) {
+    squares_[g].assign(leads_.size(), 0.0);
+    counts_[g].assign(leads_.size(), 0);
+  }
+}
+
+void PreviewAudit::addReference(double t, double dt, std::size_t steps, const std::vector<double>& forces) {
+  if (!(dt > 0) || !std::isfinite(t) || steps == 0 || forces.size() != steps * groups_.size()) return;
+  history_.push_back({t, dt, steps, forces});
+}
+
+void PreviewAudit::addSample(double t, const std::vector<double>& desired) {
+  const std::size_t n = std::min(desired.size(), groups_.size());
+  const double longest = leads_.empty() ? 0.0 : *std::max_element(leads_.begin(), leads_.end());
+  // Keep the newest reference given at or before t - longest and everything after it.
+  std::size_t keep = 0;
+  while (keep + 1 < history_.size() && history_[keep + 1].t <= t - longest) ++keep;
+  history_.erase(history_.begin(), history_.begin() + static_cast<std::ptrdiff_t>(keep));
+  for (std::size_t l = 0; l < leads_.size(); ++l) {
+    const Given* g = nullptr;  // the newest reference given at or before t - lead
+    for (const Given& h : history_)
+      if (h.t <= t - leads_[l] + 1e-9) g = &h;
+    if (!g) continue;
+    const double x = (t - g->t) / g->dt;
+    if (x > static_cast<double>(g->steps - 1) + 1e-9) continue;  // beyond that reference's horizon
+    const auto k0 = static_cast<std::size_t>(std::max(0.0, x));
+    const std::size_t k1 = std::min(k0 + 1, g->steps - 1);
+    const double a = std::clamp(x - static_cast<double>(k0), 0.0, 1.0);
+    for (std::size_t j = 0; j < n; ++j) {
+      if (!std::isfinite(desired[j])) continue;
+      const double said = std::max(0.0, (1 - a) * g->forces[k0 * groups_.size() + j] + a * g->forces[k1 * groups_.size() + j]);
+      const double e = said - std::max(0.0, desired[j]);
+      if (!std::isfinite(e)) continue;
+      squares_[groups_[j]][l] += e * e;
+      ++counts_[groups_[j]][l];
+    }
+  }
+}
+
+std::map<std::string, std::vector<double>> PreviewAudit::groups() const {
+  std::map<std::string, std::vector<double>> out;
+  for (const auto& [group, sq] : squares_) {
+    std::vector<double>& rmse = out[group];
+    for (std::size_t l = 0; l < sq.size(); ++l)
+      rmse.push_back(counts_.at(group)[l] > 0 ? std::sqrt(sq[l] / static_cast<double>(counts_.at(group)[l])) : std::nan(""));
   }
   return out;
 }

@@ -135,3 +135,47 @@ TEST(ForceTrackingAudit, AReferenceBelowTheRobotsMinimumTensionCountsAgainstTheF
   EXPECT_THROW(audit.setMinTension(-0.1), std::invalid_argument);
   EXPECT_THROW(audit.setMinTension(std::nan("")), std::invalid_argument);
 }
+
+// The floors learn of a sample's reference at that sample: a jump counts in full where it
+// is given, and the chamber moves towards it only from then on.
+TEST(ForceTrackingAudit, AJumpCountsInFullAtTheSampleItIsGiven) {
+  const CylinderSpec spec = cylinderSpec("M9");
+  const double v = spec.dead_volume + 0.5 * spec.bore_area * spec.stroke;
+  ForceTrackingAudit audit({{"FF", spec}}, kLimit, 0.002);
+  audit.start({constants::kAtmosphere});
+  for (int k = 0; k < 10; ++k) audit.add(kDt, {0.0}, {0.0}, {v}, {0}, 620e3);
+  const double before = audit.lastPerTickTension()[0];
+  const auto settled = audit.groups().at("FF");
+  audit.add(kDt, {20.0}, {0.0}, {v}, {0}, 620e3);  // the jump: given now
+  const double at_jump = audit.lastPerTickTension()[0];
+  EXPECT_NEAR(at_jump, before, 0.01);  // not moved towards it yet
+  const auto after = audit.groups().at("FF");
+  const auto sum = [](double rmse, long n) { return rmse * rmse * static_cast<double>(n); };
+  // The jump's sample adds its whole error to both floors.
+  EXPECT_NEAR(sum(after.per_tick, after.samples) - sum(settled.per_tick, settled.samples), std::pow(20.0 - at_jump, 2),
+              1e-6);
+  EXPECT_NEAR(sum(after.floor, after.samples) - sum(settled.floor, settled.samples), std::pow(20.0 - at_jump, 2), 0.5);
+  audit.add(kDt, {20.0}, {0.0}, {v}, {0}, 620e3);
+  EXPECT_GT(audit.lastPerTickTension()[0], before + 1.0);  // under way one sample later
+}
+
+// At each sample, what the reference given `lead` earlier said about that instant against
+// the reference as it came.
+TEST(PreviewAudit, MeasuresHowFarThePreviewMissed) {
+  PreviewAudit audit({"FF"}, {0.0, 0.01, 0.05});
+  audit.addReference(0.0, 0.005, 10, std::vector<double>(10, 0.0));    // says 0 N up to 45 ms
+  audit.addReference(0.02, 0.005, 10, std::vector<double>(10, 10.0));  // from 20 ms: 10 N
+  for (int k = 0; k < 4; ++k) audit.addSample(0.02 + 0.005 * k, {10.0});
+  const auto rmse = audit.groups().at("FF");
+  ASSERT_EQ(rmse.size(), 3u);
+  EXPECT_DOUBLE_EQ(rmse[0], 0.0);  // the reference as it came
+  // 10 ms ahead: at 20 and 25 ms the newest reference then was the first (0 N), at 30 and
+  // 35 ms the second.
+  EXPECT_NEAR(rmse[1], std::sqrt(200.0 / 4), 1e-9);
+  EXPECT_TRUE(std::isnan(rmse[2]));  // no reference 50 ms before any sample
+  EXPECT_THROW(PreviewAudit({"FF"}, {-0.01}), std::invalid_argument);
+  audit.addReference(0.05, 0.0, 10, std::vector<double>(10, 1.0));  // dt 0: ignored
+  audit.addReference(0.05, 0.005, 10, std::vector<double>(3, 1.0));  // wrong size: ignored
+  audit.addSample(0.06, {10.0});
+  EXPECT_DOUBLE_EQ(audit.groups().at("FF")[0], 0.0);
+}

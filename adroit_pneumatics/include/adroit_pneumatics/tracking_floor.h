@@ -57,7 +57,10 @@ std::string trackingGroup(const std::string& cylinder);
 
 // Force tracking of cylinders against their references, per group (e.g. per finger), next
 // to two floors: TrackingFloor stopping exactly, and holding one command per sample (the
-// ideal controller at the sampling rate, e.g. a pool's 200 Hz tick).
+// ideal controller at the sampling rate, e.g. a pool's 200 Hz tick). The floors are causal:
+// they learn of each sample's reference at that sample, as the robot's controller does, so
+// a reference that jumps at a sample counts in full there and is met at the next sample at
+// the earliest (and only if the chamber fills that fast).
 class ForceTrackingAudit {
  public:
   struct Cylinder {
@@ -69,7 +72,8 @@ class ForceTrackingAudit {
     double max_reference = 0;                  // N
     long samples = 0;
   };
-  // limit: the controller's command limit (V); dead_time: the plant's (s).
+  // limit: the controller's command limit (V); dead_time (s): from a command to the measured
+  // tension seeing it, the plant's tube delay plus the sensing delay of the tension compared.
   ForceTrackingAudit(std::vector<Cylinder> cylinders, double limit, double dead_time,
                      double room = constants::kAtmosphere);
   std::size_t size() const { return cylinders_.size(); }
@@ -96,7 +100,40 @@ class ForceTrackingAudit {
   double room_, min_tension_ = 0;
   std::vector<TrackingFloor> floors_, ticks_;
   std::vector<double> last_tick_tension_;
+  std::vector<double> given_;  // Pa, each cylinder's reference at the previous sample (NaN: none yet)
   std::map<std::string, Sums> sums_;
+};
+
+// How well a reference's preview predicts it: at each sample, the desired tension against
+// what the reference that was newest `lead` seconds earlier said about that instant, RMSE
+// per group for each lead. A controller's own response takes the floor's time above; a
+// preview that misses by about the floor at that lead carries no better knowledge of the
+// jumps than learning each value as it comes, which the floors assume.
+class PreviewAudit {
+ public:
+  // groups: the group of each column; leads in s, each >= 0.
+  PreviewAudit(std::vector<std::string> groups, std::vector<double> leads);
+  // A reference given at time t: `steps` rows dt apart from t, one value per column (N),
+  // row-major. Given in time order; a reference with the wrong size or dt <= 0 is ignored.
+  void addReference(double t, double dt, std::size_t steps, const std::vector<double>& forces);
+  // The desired tension of each column at time t (NaN columns are skipped), t not before
+  // the previous sample's.
+  void addSample(double t, const std::vector<double>& desired);
+  const std::vector<double>& leads() const { return leads_; }
+  // Per group, the preview's RMSE (N) for each lead; NaN for a lead no sample could check.
+  std::map<std::string, std::vector<double>> groups() const;
+
+ private:
+  struct Given {
+    double t, dt;
+    std::size_t steps;
+    std::vector<double> forces;
+  };
+  std::vector<std::string> groups_;
+  std::vector<double> leads_;
+  std::vector<Given> history_;  // time order; pruned to what the longest lead needs
+  std::map<std::string, std::vector<double>> squares_;
+  std::map<std::string, std::vector<long>> counts_;
 };
 
 }  // namespace adroit::pneumatics

@@ -7,7 +7,8 @@
 # happened (distance to the goal, lowest height, the driver's real-time factor), and the
 # bringup is ended cleanly (driver paused first, so no safety event is raised by the pools
 # going down before it). The pools' force tracking is audited against the plant's floor
-# (force_tracking_audit) over a rosbag recorded during the run, log/demo/forces.bag.
+# (force_tracking_audit) over a rosbag recorded during the run, log/demo/forces.bag, and
+# plotted into log/demo/forces.png.
 # Exit status: demo_report's (non-zero when the stack did not run sound).
 # Extra arguments go to roslaunch, e.g. `bash scripts/demo.sh rviz:=true planner:=sampling`;
 # `task:=none` runs the earlier finger-wave demo (`duration:=60` sets its report window);
@@ -91,6 +92,10 @@ if [ -s "$out_dir/forces.bag" ] && [ -n "$scene" ]; then
   echo
   rosrun adroit_pneumatics force_tracking_audit --bag "$out_dir/forces.bag" --scene "$scene" \
     --min-tension "$min_tension" --csv "$out_dir/forces.csv" || echo "demo: no force-tracking audit (no force references recorded)" >&2
+  if [ -s "$out_dir/forces.csv" ]; then
+    rosrun adroit_pneumatics plot_force_audit.py "$out_dir/forces.csv" "$out_dir/forces.png" \
+      && echo "demo: force tracking plot $out_dir/forces.png" || echo "demo: force tracking plot not written" >&2
+  fi
 fi
 
 # Six frames over the recorded run, drawn offscreen (a hidden GLFW window on a virtual display).

@@ -1,7 +1,7 @@
 // force_tracking_audit: the pools' force tracking in a recorded run, next to the plant's
 // floor (ForceTrackingAudit, tracking_floor.h), per group of cylinders.
 //   force_tracking_audit --bag run.bag [--model scene.xml | --scene arm_hand] [--limit 2.0]
-//                        [--min-tension 0.3] [--csv out.csv]
+//                        [--min-tension 0.3] [--sensing-delay 0.001] [--csv out.csv]
 // The bag holds /adroit/actuator_states and /adroit/force_reference (e.g. `rosbag record`
 // beside a bringup; scripts/demo.sh records one). At every actuator state after the first
 // reference, the desired tension of each cylinder is the newest reference stamped at or
@@ -9,8 +9,15 @@
 // stamp, as the pools take it; states outside that reference's span are skipped. The floors start from the first audited state's pressures and follow each
 // cylinder's recorded piston travel and supply; --limit is the pools' command limit (V,
 // config/pools.yaml ilqg/u_max); --min-tension the least tension the robot applies and
-// reports (the simulation driver's ~min_tension; default 0), which the floors then pull too. --csv writes time, desired and measured tension and the
-// per-sample floor's tension per cylinder (time in seconds from the first audited state).
+// reports (the simulation driver's ~min_tension; default 0), which the floors then pull too;
+// --sensing-delay the delay of the measured tension behind the chamber (the simulation's
+// ~sensors/cylinder_delay, 1 ms; the DAQ's on the robot), added to the tube delay: the floors
+// learn of each desired value at the state it is first paired with and are seen through the
+// same delays. Also printed: how far each reference's preview (5 / 10 / 20 ms ahead) was from
+// the desired value as it came, and RESULT lines of the RMSE per finger group (target 0.5 N,
+// issue 12) with the floor beside each, the bound the plant and its sensing set on this run.
+// --csv writes time, desired and measured tension and the per-sample floor's tension per
+// cylinder (time in seconds from the first audited state).
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -41,7 +48,9 @@ namespace {
 
 constexpr const char* kUsage =
     "usage: force_tracking_audit --bag run.bag [--model f.xml | --scene arm_hand] [--limit 2.0] [--min-tension 0.3]\n"
-    "                            [--csv out.csv]\n";
+    "                            [--sensing-delay 0.001] [--csv out.csv]\n";
+constexpr double kTargetRmse = 0.5;  // N per finger group (issue 12 item 5)
+const std::vector<double> kPreviewLeads = {0.005, 0.01, 0.02};  // s
 
 // The reference's value for column j at time t (linear between samples), NaN outside it.
 double desiredAt(const adroit_msgs::ForceReference& ref, std::size_t j, double t) {
@@ -93,7 +102,7 @@ double latencyEquivalent(const std::vector<std::vector<double>>& desired, const 
 
 int main(int argc, char** argv) {
   std::string bag_path, model_file, scene = "arm_hand", csv_path;
-  double limit = 2.0, min_tension = 0.0;
+  double limit = 2.0, min_tension = 0.0, sensing_delay = 0.001;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (i + 1 >= argc) {
@@ -107,12 +116,14 @@ int main(int argc, char** argv) {
     else if (a == "--csv") csv_path = v;
     else if (a == "--limit") limit = std::atof(v.c_str());
     else if (a == "--min-tension") min_tension = std::atof(v.c_str());
+    else if (a == "--sensing-delay") sensing_delay = std::atof(v.c_str());
     else {
       std::fprintf(stderr, "force_tracking_audit: unknown argument %s\n%s", a.c_str(), kUsage);
       return 2;
     }
   }
-  if (bag_path.empty() || !(limit > 0) || !(min_tension >= 0) || !std::isfinite(min_tension)) {
+  if (bag_path.empty() || !(limit > 0) || !(min_tension >= 0) || !std::isfinite(min_tension) ||
+      !(sensing_delay >= 0 && sensing_delay <= 0.05)) {
     std::fprintf(stderr, "%s", kUsage);
     return 2;
   }
@@ -129,6 +140,8 @@ int main(int argc, char** argv) {
     std::vector<std::size_t> in_reference;  // their columns in the reference (resolved per reference)
     std::vector<double> volume_area, dead;  // per audited cylinder
     std::unique_ptr<ForceTrackingAudit> audit;
+    std::unique_ptr<PreviewAudit> preview;
+    std::vector<double> given;  // a reference's rows in the audited columns
     std::vector<double> desired, tension, volume, volume_rate, pressure;
     std::ofstream csv;
     // Per audited sample (after the first): its time, desired and per-sample floor tensions,
@@ -171,7 +184,10 @@ int main(int argc, char** argv) {
           dead.push_back(spec.dead_volume);
         }
         if (names.empty()) throw std::runtime_error("the first force reference names no cylinder of " + model_file);
-        audit = std::make_unique<ForceTrackingAudit>(std::move(cylinders), limit, PlantOptions{}.tube_delay);
+        std::vector<std::string> groups;
+        for (const auto& c : cylinders) groups.push_back(c.group);
+        audit = std::make_unique<ForceTrackingAudit>(std::move(cylinders), limit, PlantOptions{}.tube_delay + sensing_delay);
+        preview = std::make_unique<PreviewAudit>(groups, kPreviewLeads);
         audit->setMinTension(min_tension);
         if (!csv_path.empty()) {
           csv.open(csv_path);
@@ -187,8 +203,20 @@ int main(int argc, char** argv) {
     std::size_t next_reference = 0;
     for (const auto& s : state_msgs) {
       ++states;
-      while (next_reference < reference_msgs.size() && reference_msgs[next_reference]->header.stamp <= s->header.stamp)
+      while (next_reference < reference_msgs.size() && reference_msgs[next_reference]->header.stamp <= s->header.stamp) {
         ref = reference_msgs[next_reference++];
+        if (!preview) continue;
+        // Its rows in the audited columns (a reference that misses one is left out).
+        given.assign(ref->steps * names.size(), 0.0);
+        bool all = true;
+        for (std::size_t j = 0; j < names.size() && all; ++j) {
+          const auto col = std::find(ref->name.begin(), ref->name.end(), names[j]) - ref->name.begin();
+          all = col < static_cast<long>(ref->name.size());
+          for (std::size_t k = 0; all && k < ref->steps; ++k)
+            given[k * names.size() + j] = ref->force[k * ref->name.size() + static_cast<std::size_t>(col)];
+        }
+        if (all) preview->addReference(ref->header.stamp.toSec(), ref->dt, ref->steps, given);
+      }
       if (!audit || !ref) continue;
       const std::size_t n = s->name.size();
       if (s->pressure.size() != n || s->length.size() != n || s->length_rate.size() != n || s->force.size() != n ||
@@ -226,6 +254,7 @@ int main(int argc, char** argv) {
       if (audited == 0) audit->start(pressure);
       else {
         audit->add(t - last_t, desired, tension, volume, volume_rate, s->supply_pressure);
+        preview->addSample(t, desired);
         times.push_back(t);
         desired_log.push_back(desired);
         floor_log.push_back(audit->lastPerTickTension());
@@ -247,13 +276,17 @@ int main(int argc, char** argv) {
                                " states, " + std::to_string(references) + " references)");
     std::printf("force tracking in %s: %zu actuator states audited (%zu skipped), %zu references (%zu unusable)\n",
                 bag_path.c_str(), audited, skipped, references, bad_references);
-    std::printf("measured vs desired tendon tension, RMSE in N, next to the plant's floor: a cylinder racing at the\n"
-                "command limit (+-%.1f V) to each new desired value after the plant's %.0f ms tube delay and stopping\n"
-                "on it exactly, and per sample: one command per state sample, chosen with an exact model; the robot's\n"
-                "minimum tension %.2f N bounds measured and floors alike\n",
-                limit, PlantOptions{}.tube_delay * 1e3, min_tension);
-    std::printf("  %-6s %7s %7s %10s %10s %8s %9s\n", "group", "RMSE", "floor", "per sample", "RMSE/floor", "max ref",
-                "as delay");
+    std::printf("measured vs desired tendon tension, RMSE in N, next to the plant's floor: a cylinder that learns of\n"
+                "each desired value at the state it is first paired with, races at the command limit (+-%.1f V)\n"
+                "towards it after %.0f ms (the plant's %.0f ms tube delay and %.0f ms of sensing) and stops on it\n"
+                "exactly, and per sample: one command per state sample, chosen with an exact model; the robot's\n"
+                "minimum tension %.2f N bounds measured and floors alike. preview: how far the reference given\n"
+                "5 / 10 / 20 ms earlier was from the desired value as it came\n",
+                limit, (PlantOptions{}.tube_delay + sensing_delay) * 1e3, PlantOptions{}.tube_delay * 1e3,
+                sensing_delay * 1e3, min_tension);
+    std::printf("  %-6s %7s %7s %10s %10s %8s %9s %20s\n", "group", "RMSE", "floor", "per sample", "RMSE/floor", "max ref",
+                "as delay", "preview 5/10/20 ms");
+    const auto ahead = preview->groups();
     const double spacing = times.size() > 1 ? (times.back() - times.front()) / static_cast<double>(times.size() - 1) : 0;
     for (const auto& [group, g] : audit->groups()) {
       std::vector<std::size_t> members;
@@ -263,11 +296,25 @@ int main(int argc, char** argv) {
       char as_delay[32];
       if (std::isfinite(delay)) std::snprintf(as_delay, sizeof as_delay, "%.1f ms", delay * spacing * 1e3);
       else std::snprintf(as_delay, sizeof as_delay, "> %d ms", static_cast<int>(kMaxShift * spacing * 1e3));
-      std::printf("  %-6s %7.2f %7.2f %10.2f %10.2f %8.1f %9s\n", group.c_str(), g.rmse, g.floor, g.per_tick,
-                  g.per_tick > 0 ? g.rmse / g.per_tick : 0.0, g.max_reference, as_delay);
+      char previewed[64] = "-";
+      if (ahead.count(group) && ahead.at(group).size() == kPreviewLeads.size() && std::isfinite(ahead.at(group)[0]))
+        std::snprintf(previewed, sizeof previewed, "%.2f / %.2f / %.2f", ahead.at(group)[0], ahead.at(group)[1],
+                      ahead.at(group)[2]);
+      std::printf("  %-6s %7.2f %7.2f %10.2f %10.2f %8.1f %9s %20s\n", group.c_str(), g.rmse, g.floor, g.per_tick,
+                  g.per_tick > 0 ? g.rmse / g.per_tick : 0.0, g.max_reference, as_delay, previewed);
     }
     std::printf("(as delay: how late the per-sample floor would have to act to be as far off as the measured\n"
-                "tension: its trace shifted by that much against the desired one has the measured RMSE)\n");
+                "tension: its trace shifted by that much against the desired one has the measured RMSE)\n\n");
+    // The figure of issue 12 item 5 per finger group, each with the bound of this run beside
+    // it: where the floor is above the target, no controller that learns of the plan's values
+    // as they come reaches it (and the preview column says whether the plans' previews knew more).
+    for (const auto& [group, g] : audit->groups()) {
+      if (group == "wrist" || group == "arm") continue;
+      std::printf("RESULT adroit_pneumatics/demo_force_rmse_%s %.2f N target <= %.1f %s\n", group.c_str(), g.rmse,
+                  kTargetRmse, g.rmse <= kTargetRmse ? "PASS" : "FAIL");
+      std::printf("  bound: the plant's floor on this run %.2f N (%s 0.5 N), the pools %.2f x the per-sample floor\n",
+                  g.floor, g.floor > kTargetRmse ? "above" : "below", g.per_tick > 0 ? g.rmse / g.per_tick : 0.0);
+    }
   } catch (const std::exception& e) {
     std::fprintf(stderr, "force_tracking_audit: %s\n", e.what());
     return 1;

@@ -119,6 +119,14 @@ TEST(ForceAuditBag, ReportsTheErrorInTheBag) {
   EXPECT_NEAR(rmseOf(b.out, "TH"), 0.5, 0.005) << b.out;
   EXPECT_TRUE(std::isnan(rmseOf(b.out, "MF"))) << b.out;
   EXPECT_NE(b.out.find("200 actuator states audited"), std::string::npos) << b.out;
+  // The figure per finger group against its 0.5 N target, the floor beside it; one
+  // reference over the whole run: its preview is the reference as it came.
+  EXPECT_NE(a.out.find("RESULT adroit_pneumatics/demo_force_rmse_FF 0.00 N target <= 0.5 PASS"), std::string::npos)
+      << a.out;
+  EXPECT_NE(b.out.find("RESULT adroit_pneumatics/demo_force_rmse_FF 1.00 N target <= 0.5 FAIL"), std::string::npos)
+      << b.out;
+  EXPECT_NE(b.out.find("bound: the plant's floor on this run"), std::string::npos) << b.out;
+  EXPECT_NE(a.out.find("0.00 / 0.00 / 0.00"), std::string::npos) << a.out;
 }
 
 TEST(ForceAuditBag, BadInputIsAClearError) {

@@ -5,7 +5,7 @@
 //
 //   mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned]
 //               [--out DIR] [--seed S] [--fixed-latency S] [--latency-sweep S,S,...]
-//               [--dt S] [--horizon S] [--skip K] [--sensed] [--contact M,S] [--events]
+//               [--dt S] [--horizon S] [--skip K] [--sensed] [--feedback-scale F] [--contact M,S] [--events]
 //               [--set key=number]... [--pool ilqg_key=number]...
 //
 // --dt, --horizon, --skip override the task's planner_dt and horizon hints and the iLQG
@@ -14,6 +14,8 @@
 // typing 0.001, 0.001 as the node).
 // --sensed: the planner and the policy see the driver's sensed signals (sensor realism: noise,
 // quantisation, delays) instead of the true state, as the node does.
+// --feedback-scale F: the fraction of the policy's feedback gains applied, in [0, 1] (the
+// node's ~feedback_scale; 1 by default).
 // --latency-sweep: iLQG on every task again with each fixed planning latency (simulated
 // s per optimisation instead of the measured wall time): how fast the planner must be.
 // Variant as_planned (diagnostic): iLQG in force mode against a simulation that runs the
@@ -78,6 +80,7 @@
 #include <adroit_mpc/type_task.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <filesystem>
 #include <cstdio>
@@ -239,11 +242,17 @@ class TrialRunner {
         pool_cylinders_.push_back(
             {c.name, c.bore_area, pneumatics::deadVolume(c.type, c.bore_diameter), models.forCylinder(c.name)});
       pool_options_.controller = "ilqg";
+      std::vector<std::string> groups;
       for (const auto& c : robot_->cylinders()) {
         pneumatics::CylinderSpec spec = pneumatics::cylinderSpec(c.type);
         spec.dead_volume = pneumatics::deadVolume(c.type, c.bore_diameter);
         audited_.push_back({pneumatics::trackingGroup(c.name), spec});
+        groups.push_back(audited_.back().group);
       }
+      // From a valve command to the sensed tension seeing it: the tube delay, then the
+      // pressure sensor's delay.
+      audit_dead_time_ = pneumatics::PlantOptions{}.tube_delay + (config.sensors.enabled ? config.sensors.cylinder_delay : 0);
+      preview_audit_ = std::make_unique<pneumatics::PreviewAudit>(groups, std::vector<double>(kPreviewLeads.begin(), kPreviewLeads.end()));
     }
   }
 
@@ -257,8 +266,7 @@ class TrialRunner {
     if (variant_.pneumatic) {
       pool_ = std::make_unique<pneumatics::CylinderPool>(pool_cylinders_, robot_->cylinderNames(), pool_options_);
       if (!force_audit_)  // the pools' command limit is known by now (setPoolParams)
-        force_audit_ = std::make_unique<pneumatics::ForceTrackingAudit>(audited_, pool_options_.ilqg.u_max,
-                                                                         pneumatics::PlantOptions{}.tube_delay);
+        force_audit_ = std::make_unique<pneumatics::ForceTrackingAudit>(audited_, pool_options_.ilqg.u_max, audit_dead_time_);
       force_audit_->start(robot_->sensed().pressure);
       last_floor_time_ = robot_->clock();
     }
@@ -398,7 +406,7 @@ class TrialRunner {
     const mjData* d = robot_->data();
     measure(qpos_, qvel_);
     if (!variant_.pneumatic) {
-      if (have_policy) policy.action(d->time, qpos_.data(), qvel_.data(), d->act, ctrl_.data());
+      if (have_policy) policy.action(d->time, qpos_.data(), qvel_.data(), d->act, ctrl_.data(), feedback_scale_);
       else std::fill(ctrl_.begin(), ctrl_.end(), 0.0);
       for (double& u : ctrl_) u = std::isfinite(u) ? std::max(0.0, u) : 0.0;
       robot_->commandForces({}, all_actuators_, ctrl_);
@@ -410,10 +418,12 @@ class TrialRunner {
         // As the node's control loop in pneumatic mode: the policy with feedback on the
         // current state, over the rest of its horizon, at the pools' rate.
         const int samples = policy.reference(d->time, qpos_.data(), qvel_.data(), d->act, kMaxReferenceSamples,
-                                             reference_.data());
+                                             reference_.data(), feedback_scale_);
         const auto verdict = pool_->setReference(now, now, policy.policy.dt, samples, robot_->cylinderNames(),
                                                  positive(reference_, samples * m->nu));
         if (!verdict.ok()) throw std::runtime_error("pool rejected the policy's reference: " + verdict.detail);
+        preview_audit_->addReference(now, policy.policy.dt, static_cast<std::size_t>(samples),
+                                     {reference_.begin(), reference_.begin() + samples * m->nu});
         recordForceTracking(sensed);
       } else if (have_policy && sent_.steps > 0) {  // the last plan's tensions, interpolated at now
         const std::size_t nu = all_actuators_.size();
@@ -468,7 +478,7 @@ class TrialRunner {
     if (force_trace_.empty()) return;
     std::ofstream out(path);
     out << "time";
-    for (const char* kind : {"plan", "sensed"})
+    for (const char* kind : {"plan", "sensed", "floor_per_tick"})
       for (const std::string& name : robot_->cylinderNames()) out << "," << name << ":" << kind;
     out << "\n";
     for (const auto& row : force_trace_) {
@@ -512,6 +522,7 @@ class TrialRunner {
   // The planner and the policy see the driver's sensed signals (noise, quantisation, delays)
   // instead of the true state, as the node does.
   void setSensed(bool sensed) { sensed_ = sensed; }
+  void setFeedbackScale(double scale) { feedback_scale_ = scale; }
 
  private:
   // The state the controller sees: the true one, or (sensed_) the true one with every 1-DOF
@@ -537,6 +548,7 @@ class TrialRunner {
   }
 
   bool sensed_ = false;
+  double feedback_scale_ = 1.0;  // the node's ~feedback_scale
   std::vector<double> qpos_, qvel_;
   static constexpr double kPoolPeriod = 0.005;  // s, the pools' 200 Hz (config/pools.yaml)
   static constexpr int kMaxReferenceSamples = 256;
@@ -559,16 +571,21 @@ class TrialRunner {
     }
     force_audit_->add(now - last_floor_time_, reference_, tension, volume_, volume_rate_, sensed.supply_pressure);
     last_floor_time_ = now;
+    preview_audit_->addSample(now, {reference_.begin(), reference_.begin() + tension.size()});
     std::vector<double> row = {now};
     row.insert(row.end(), reference_.begin(), reference_.begin() + tension.size());
     row.insert(row.end(), tension.begin(), tension.end());
+    const std::vector<double>& floor = force_audit_->lastPerTickTension();
+    row.insert(row.end(), floor.begin(), floor.end());
     force_trace_.push_back(std::move(row));
   }
-  std::vector<std::vector<double>> force_trace_;  // this trial: time, planned tensions, sensed tensions
+  std::vector<std::vector<double>> force_trace_;  // this trial: time, planned, sensed and per-tick floor tensions
   std::vector<double> reference_, force_;
   std::vector<double> pool_seconds_;  // wall time of each pool tick (all cylinders)
   std::vector<pneumatics::ForceTrackingAudit::Cylinder> audited_;  // pneumatic variants
   std::unique_ptr<pneumatics::ForceTrackingAudit> force_audit_;
+  std::unique_ptr<pneumatics::PreviewAudit> preview_audit_;  // policy reference only: given at the tick, from it
+  double audit_dead_time_ = 0;  // s
   std::vector<double> volume_, volume_rate_;
   double last_floor_time_ = 0;
 
@@ -581,6 +598,12 @@ class TrialRunner {
   std::map<std::string, pneumatics::ForceTrackingAudit::Group> forceTracking() const {
     return force_audit_ ? force_audit_->groups() : std::map<std::string, pneumatics::ForceTrackingAudit::Group>{};
   }
+  // Pneumatic variant: per group, the preview's RMSE at each of kPreviewLeads (empty if none).
+  std::map<std::string, std::vector<double>> previewError() const {
+    return preview_audit_ ? preview_audit_->groups() : std::map<std::string, std::vector<double>>{};
+  }
+  double auditDeadTime() const { return audit_dead_time_; }
+  static constexpr std::array<double, 3> kPreviewLeads = {0.005, 0.01, 0.02};  // s
 
  private:
   std::string task_name_;
@@ -617,6 +640,7 @@ int main(int argc, char** argv) {
   unsigned seed = 1;
   double fixed_latency = -1;
   bool sensed = false;
+  double feedback_scale = 1.0;
   double contact_margin = -1, contact_softness = -1;  // --contact M,S
   bool print_events = false;
   std::map<std::string, double> params;  // --set key=value
@@ -636,6 +660,7 @@ int main(int argc, char** argv) {
     else if (a == "--fixed-latency" && i + 1 < argc) fixed_latency = std::atof(argv[++i]);
     else if (a == "--latency-sweep" && i + 1 < argc) sweep = split(argv[++i]);
     else if (a == "--sensed") sensed = true;
+    else if (a == "--feedback-scale" && i + 1 < argc) feedback_scale = std::atof(argv[++i]);
     else if (a == "--contact" && i + 1 < argc && std::strchr(argv[i + 1], ',')) {
       contact_margin = std::atof(argv[++i]);
       contact_softness = std::atof(std::strchr(argv[i], ',') + 1);
@@ -660,12 +685,17 @@ int main(int argc, char** argv) {
                    "usage: mpc_success [--trials N] [--tasks catch,relocate,type] "
                    "[--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned] [--out DIR] [--seed S] "
                    "[--fixed-latency S] [--latency-sweep S,S,...] [--dt S] [--horizon S] [--skip K] [--sensed] "
+                   "[--feedback-scale F] "
                    "[--contact M,S] [--events] [--set key=number]... [--pool ilqg_key=number]...\n");
       return 2;
     }
   }
   if (trials < 1) {
     std::fprintf(stderr, "mpc_success: --trials must be at least 1\n");
+    return 2;
+  }
+  if (!(feedback_scale >= 0 && feedback_scale <= 1)) {
+    std::fprintf(stderr, "mpc_success: --feedback-scale must be in [0, 1]\n");
     return 2;
   }
   const std::map<std::string, Variant> known = {{"ilqg", {"ilqg", "ilqg", true}},
@@ -723,6 +753,7 @@ int main(int argc, char** argv) {
       TrialRunner runner(task, variant, overrides, contact_margin, contact_softness);
       runner.setFixedLatency(fixed_latency);
       runner.setSensed(sensed);
+      runner.setFeedbackScale(feedback_scale);
       runner.setPrintEvents(print_events);
       runner.setParams(params);
       runner.setPoolParams(pool_ilqg);
@@ -770,15 +801,23 @@ int main(int argc, char** argv) {
         std::printf("%-9s %-14s pools: %.2f ms per 5 ms tick for %zu cylinders (median, one core)\n", "", "",
                     1e3 * runner.poolTickMedian(), runner.cylinders());
         std::printf("%-9s %-14s force tracking, sensed vs planned tension, RMSE N (the demo's figure), against\n"
-                    "%-9s %-14s the floor: a cylinder racing at the command limit to each new reference after the\n"
-                    "%-9s %-14s plant's %.0f ms tube delay, stopping on it exactly, and per tick: one command per %.0f ms\n"
-                    "%-9s %-14s pool tick, chosen with an exact model\n",
-                    "", "", "", "", "", "", 1e3 * pneumatics::PlantOptions{}.tube_delay, 1e3 * TrialRunner::poolPeriod(),
-                    "", "");
-        std::printf("%-9s %-14s   %-6s %6s %6s %8s %8s\n", "", "", "group", "RMSE", "floor", "per tick", "max ref");
-        for (const auto& [group, f] : runner.forceTracking())
-          std::printf("%-9s %-14s   %-6s %6.2f %6.2f %8.2f %8.1f\n", "", "", group.c_str(), f.rmse, f.floor, f.per_tick,
-                      f.max_reference);
+                    "%-9s %-14s the floor: a cylinder that learns of each reference at the tick it is given, races at\n"
+                    "%-9s %-14s the command limit after %.0f ms (tube delay and pressure sensing) and stops on it\n"
+                    "%-9s %-14s exactly, and per tick: one command per %.0f ms pool tick, chosen with an exact model;\n"
+                    "%-9s %-14s preview: the reference given 5 / 10 / 20 ms earlier against the one given now\n",
+                    "", "", "", "", "", "", 1e3 * runner.auditDeadTime(), "", "", 1e3 * TrialRunner::poolPeriod(), "",
+                    "");
+        std::printf("%-9s %-14s   %-6s %6s %6s %8s %10s %8s %20s\n", "", "", "group", "RMSE", "floor", "per tick",
+                    "RMSE/tick", "max ref", "preview 5/10/20 ms");
+        const auto preview = runner.previewError();
+        for (const auto& [group, f] : runner.forceTracking()) {
+          char ahead[64] = "-";
+          if (preview.count(group) && preview.at(group).size() == 3 && std::isfinite(preview.at(group)[0]))
+            std::snprintf(ahead, sizeof ahead, "%.2f / %.2f / %.2f", preview.at(group)[0], preview.at(group)[1],
+                          preview.at(group)[2]);
+          std::printf("%-9s %-14s   %-6s %6.2f %6.2f %8.2f %10.2f %8.1f %20s\n", "", "", group.c_str(), f.rmse, f.floor,
+                      f.per_tick, f.per_tick > 0 ? f.rmse / f.per_tick : 0.0, f.max_reference, ahead);
+        }
       }
       std::fflush(stdout);
     }

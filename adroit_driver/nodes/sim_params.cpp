@@ -45,6 +45,9 @@ SimConfig readSimConfig(const rosutil::Params& p) {
   s.joint_velocity_noise_std = p.number("sensors/joint_velocity_noise_std", s.joint_velocity_noise_std);
   s.joint_quantum = p.number("sensors/joint_quantum", s.joint_quantum);
   s.joint_delay = p.number("sensors/joint_delay", s.joint_delay);
+  s.slide_noise_std = p.number("sensors/slide_noise_std", s.slide_noise_std);
+  s.slide_velocity_noise_std = p.number("sensors/slide_velocity_noise_std", s.slide_velocity_noise_std);
+  s.slide_quantum = p.number("sensors/slide_quantum", s.slide_quantum);
   s.cylinder_delay = p.number("sensors/cylinder_delay", s.cylinder_delay);
   s.cylinder.pressure_noise_std = p.number("sensors/pressure_noise_std", s.cylinder.pressure_noise_std);
   s.cylinder.length_noise_std = p.number("sensors/length_noise_std", s.cylinder.length_noise_std);

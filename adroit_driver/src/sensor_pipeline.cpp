@@ -114,8 +114,10 @@ void SensorPipeline::sampleJoints(double now, const Signals& truth) {
   for (std::size_t j = 0; j < n; ++j) {
     double q = truth.joint_position[j], v = truth.joint_velocity[j];
     if (params_.enabled) {
-      q = quantise(q + noise(params_.joint_noise_std), params_.joint_quantum);
-      v += noise(params_.joint_velocity_noise_std);
+      const bool slide = j < slide_.size() && slide_[j];
+      q = quantise(q + noise(slide ? params_.slide_noise_std : params_.joint_noise_std),
+                   slide ? params_.slide_quantum : params_.joint_quantum);
+      v += noise(slide ? params_.slide_velocity_noise_std : params_.joint_velocity_noise_std);
     }
     frame_[j] = q;
     frame_[n + j] = v;

@@ -129,6 +129,9 @@ SimulatedRobot::SimulatedRobot(const SimConfig& config) : config_(config) {
   travel_rate_.assign(n, 0.0);
   sensors_ = SensorPipeline(config_.sensors, config_.mode, bore_area, description::kAtmosphericPressure,
                             config_.min_tension, config_.timestep);
+  std::vector<char> slide;
+  for (int j : joint_ids_) slide.push_back(m->jnt_type[j] == mjJNT_SLIDE);
+  sensors_.setSlideJoints(std::move(slide));
 
   std::string error;
   if (!resetToKeyframe(config_.initial_keyframe, &error)) throw std::invalid_argument("~initial_keyframe: " + error);

@@ -160,5 +160,33 @@ TEST(SensorPipeline, NoiseHasTheConfiguredSpreadAndRepeatsWithTheSeed) {
   EXPECT_NEAR(std, params.joint_noise_std, 0.1 * params.joint_noise_std);
 }
 
+// A slide joint (a keypad key) reads in metres with the linear sensor's spread and steps,
+// a hinge beside it with the Hall sensor's radians.
+TEST(SensorPipeline, SlideJointsReadWithTheLinearSensorsSpread) {
+  SensorRealism params;
+  params.joint_delay = 0;
+  SensorPipeline p(params, ActuationMode::kPneumatic, {1e-4}, 101325.0, 0.0);
+  p.setSlideJoints({0, 1});
+  Signals truth = truthAt(0.0);
+  truth.joint_position = {0.0, -0.003};
+  truth.joint_velocity = {0.0, 0.0};
+  truth.joint_effort = {0.0, 0.0};
+  p.restart(0.0, truth);
+  double hinge2 = 0, slide2 = 0, slide_v2 = 0;
+  const int n = 4000;
+  for (int k = 1; k <= n; ++k) {
+    p.update(k * 0.002, 0.002, truth);
+    const double key = p.sensed().joint_position[1];
+    hinge2 += std::pow(p.sensed().joint_position[0], 2);
+    slide2 += std::pow(key + 0.003, 2);
+    slide_v2 += std::pow(p.sensed().joint_velocity[1], 2);
+    ASSERT_NEAR(std::remainder(key, params.slide_quantum), 0.0, 1e-12) << "not on the linear sensor's steps";
+  }
+  EXPECT_NEAR(std::sqrt(hinge2 / n), params.joint_noise_std, 0.15 * params.joint_noise_std);
+  EXPECT_NEAR(std::sqrt(slide2 / n), std::hypot(params.slide_noise_std, params.slide_quantum / std::sqrt(12.0)),
+              0.15 * params.slide_noise_std);
+  EXPECT_NEAR(std::sqrt(slide_v2 / n), params.slide_velocity_noise_std, 0.1 * params.slide_velocity_noise_std);
+}
+
 }  // namespace
 }  // namespace adroit::driver

@@ -77,6 +77,10 @@ class SensorPipeline {
   SensorPipeline(const SensorRealism& params, ActuationMode mode, std::vector<double> bore_area,
                  double atmospheric_pressure, double min_tension, double timestep = 0);
 
+  // Which joints of Signals::joint_position are slide joints (metres: SensorRealism's
+  // slide_* figures) rather than hinges (radians); none by default.
+  void setSlideJoints(std::vector<char> slide) { slide_ = std::move(slide); }
+
   // Feeds the true signals at monotonic time `now`, `dt` after the previous update.
   void update(double now, double dt, const Signals& truth);
   // Drops all history (filters, delay lines): from now on the sensors see `truth` (after a
@@ -105,6 +109,7 @@ class SensorPipeline {
   NormalNoise noise_;
   pneumatics::SensorModel cylinder_model_{1};
   double next_joint_sample_ = 0;
+  std::vector<char> slide_;              // per joint: 1 = slide joint
   std::vector<double> previous_length_;  // filtered, for the length rate
   std::vector<double> length_rate_;
   DelayLine joints_, cylinders_, touch_, object_;

@@ -31,6 +31,12 @@ struct SensorRealism {
   double joint_quantum = 6.283185307179586 / 4096;  // rad, 12-bit over a full turn
   double joint_velocity_noise_std = 0.05;  // rad/s
   double joint_delay = 0.002;           // s, MCU -> CAN -> driver, one 500 Hz frame
+  // Slide joints (the keypad's keys, not the hand's) read in metres by a linear sensor: the
+  // hand's Hall-sensor noise and 12-bit steps in radians would be 3.5 mm and 1.5 mm on a key
+  // of 6 mm travel. Assumed: the piston-length sensor's figures (SICK MPS, table 3.1).
+  double slide_noise_std = 1e-4;        // m
+  double slide_quantum = 5e-5;          // m
+  double slide_velocity_noise_std = 0.002;  // m/s
   double cylinder_delay = 0.001;        // s, DAQ acquisition and transfer
   double touch_noise_std = 0.01;        // N
   double touch_delay = 0.002;           // s

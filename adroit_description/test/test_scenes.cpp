@@ -4,6 +4,7 @@
 
 #include <sys/stat.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -123,6 +124,28 @@ TEST(Scenes, PlanningVariantHasTable61SpringsAndArmature) {
   EXPECT_DOUBLE_EQ(armature(plan.model.get(), "THJ0"), 0.06);
   EXPECT_DOUBLE_EQ(sim.model->jnt_stiffness[t.joints.at("FFJ3")], 0.0);
   EXPECT_LT(armature(sim.model.get(), "THJ0"), 0.01);
+}
+
+// No planning model has joint friction loss (a constraint row per joint in every step of the
+// planner's derivatives), while the simulated joints keep theirs; the keypad's planning
+// fingers are light and unsprung (typing), never lighter than the physical joints.
+TEST(Scenes, PlanningVariantsHaveNoFrictionLossAndTheKeypadLightFingers) {
+  for (const auto& facts : expectedScenes()) {
+    SCOPED_TRACE(facts.name);
+    auto sim = loadScene(facts.name, false), plan = loadScene(facts.name, true);
+    double sim_loss = 0;
+    for (int i = 0; i < plan.model->nv; ++i) EXPECT_EQ(plan.model->dof_frictionloss[i], 0.0) << "dof " << i;
+    for (int i = 0; i < sim.model->nv; ++i) sim_loss += sim.model->dof_frictionloss[i];
+    EXPECT_GT(sim_loss, 0.0);
+  }
+  auto sim = loadScene("keypad", false), plan = loadScene("keypad", true);
+  adroit::ModelTables t(plan.model.get());
+  for (const char* j : {"FFJ3", "FFJ1", "MFJ2", "RFJ0", "THJ0", "WRJ0"}) {
+    SCOPED_TRACE(j);
+    const int dof = plan.model->jnt_dofadr[t.joints.at(j)];
+    EXPECT_DOUBLE_EQ(plan.model->jnt_stiffness[t.joints.at(j)], 0.0);
+    EXPECT_DOUBLE_EQ(plan.model->dof_armature[dof], std::max(0.003, sim.model->dof_armature[dof]));
+  }
 }
 
 TEST(Scenes, SimulatesWithoutRuntimeWarnings) {

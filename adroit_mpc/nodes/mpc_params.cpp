@@ -89,7 +89,7 @@ MpcParams readParams(const ros::NodeHandle& pnh) {
 
   adroit_mpc::PlannerSettings& s = out.settings;
   s.threads = p.integer("threads", s.threads, 0, 64);
-  // The task's hints (thesis table 6.3: typing plans 0.64 s at 20 ms) unless set here.
+  // The task's hints (config/tasks/<task>.yaml: typing plans 0.2 s at 10 ms) unless set here.
   p.checkKeys("tasks", std::set<std::string>(kTasks.begin(), kTasks.end()));
   for (const auto& t : kTasks) out.tasks[t] = readTaskParams(p, pnh, "tasks/" + t);
   const auto& hints = out.tasks[out.task].numbers;

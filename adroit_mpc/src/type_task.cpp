@@ -73,8 +73,8 @@ TaskParams TypeTask::defaults() {
                {"w_other_keys", 5.0},    {"w_posture", 0.1},         {"w_control", 0.1},
                {"w_synergy", 0.08},      {"terminal_scale", 5.0},    {"hover_height", 0.015},
                {"approach_smoothing", 0.005}, {"key_period", 0.25}, {"min_lead", 1.0},
-               {"step_smoothness", 0.03}, {"release_depth", 0.0035}, {"horizon", 0.64},
-               {"planner_dt", 0.02}};
+               {"step_smoothness", 0.03}, {"release_depth", 0.0035}, {"horizon", 0.2},
+               {"planner_dt", 0.01}};
   return p;
 }
 

@@ -246,7 +246,7 @@ TEST_F(Typing, ObjectGoalsAreNotTaken) {
   EXPECT_FALSE(task->release(&why));
 }
 
-// The planner integrates the keypad at its knot spacing (type.yaml planner_dt, 20 ms). A key
+// The planner integrates the keypad at its knot spacing (type.yaml planner_dt, 10 ms). A key
 // released from 5 mm down must come back up and settle, not oscillate with growing amplitude
 // (explicit spring integration: unstable once omega * dt > 2), or every plan that touches a
 // key predicts nonsense.

@@ -23,7 +23,7 @@ function(adroit_mpc_ros_targets)
   install(TARGETS adroit_mpc RUNTIME DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
   install(DIRECTORY launch DESTINATION ${CATKIN_PACKAGE_SHARE_DESTINATION})
   # rostest finds the python test node like rosrun does: installed with the package.
-  catkin_install_python(PROGRAMS test/test_mpc_lockstep.py test/test_mpc_pneumatic.py DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
+  catkin_install_python(PROGRAMS test/test_mpc_lockstep.py test/test_mpc_pneumatic.py test/test_mpc_typing_lockstep.py DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
 
   if(CATKIN_ENABLE_TESTING)
     find_package(rostest REQUIRED)
@@ -31,5 +31,7 @@ function(adroit_mpc_ros_targets)
     add_rostest(test/mpc_lockstep.test DEPENDENCIES adroit_mpc)
     # Pneumatic mode in real time with the pools: references, tracking, no watchdog trip.
     add_rostest(test/mpc_pneumatic.test DEPENDENCIES adroit_mpc)
+    # Typing through the node in lockstep: the keys of a sequence registered in order.
+    add_rostest(test/mpc_typing_lockstep.test DEPENDENCIES adroit_mpc)
   endif()
 endfunction()

@@ -355,7 +355,7 @@ def arm_and_hand(forearm_euler=PALM_DOWN):
                  geoms=[Capsule("C_arm_elbow", (-0.03, 0, 0), (0.03, 0, 0), 0.035)],
                  segment=(0, 1, 0), children=[fa], rgba="0.35 0.38 0.42 1")
     upper = Body("arm_upper", (0, 0, 0.30),
-                 joint=Joint("ARJ2", (1, 0, 0), (-0.9, 0.6), moment_arm=0.055, cylinder="M40",
+                 joint=Joint("ARJ2", (1, 0, 0), (-0.9, 0.6), moment_arm=0.055, cylinder="M24x5",
                              damping=5.0, armature=0.05, plan_armature=2.40),
                  mass=2.0, com=(0, 0.15, 0), inertia=(0.016, 0.002, 0.016),
                  geoms=[Capsule("C_arm_upper", (0, 0.04, 0), (0, 0.26, 0), 0.045)],

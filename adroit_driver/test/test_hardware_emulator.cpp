@@ -23,7 +23,7 @@ namespace adroit::driver::can {
 namespace {
 
 constexpr double kDt = 0.002;
-constexpr int kCylinder = 2;  // A_ARJ2_flex (M40): valve board 0, channel 2 (group 0), bus act0
+constexpr int kCylinder = 2;  // A_ARJ2_flex (M24x5): valve board 0, channel 2 (group 0), bus act0
 
 SimConfig simConfig(const std::string& scene = "arm_hand") {
   SimConfig c;

@@ -8,8 +8,8 @@
 //               [--dt S] [--horizon S] [--skip K] [--sensed] [--feedback-scale F] [--contact M,S] [--events]
 //               [--set key=number]... [--pool ilqg_key=number]...
 //
-// --dt, --horizon, --skip override the task's planner_dt and horizon hints and the iLQG
-// derivative skip (defaults: config/tasks/<task>.yaml, config/mpc.yaml).
+// --dt, --horizon, --skip override the task's planner_dt, horizon and derivative_skip hints
+// (defaults: config/tasks/<task>.yaml, else config/mpc.yaml's).
 // --contact M,S: the planning model's contact margin and softness [m] (defaults: planning_model.h;
 // typing 0.001, 0.001 as the node).
 // --sensed: the planner and the policy see the driver's sensed signals (sensor realism: noise,
@@ -217,6 +217,10 @@ class TrialRunner {
     const TaskParams defaults = defaultTaskParams(task);
     if (settings_.horizon <= 0) settings_.horizon = paramNumber(task, defaults, "horizon", 0.01, 5);
     if (settings_.dt <= 0) settings_.dt = paramNumber(task, defaults, "planner_dt", 1e-4, 0.1);
+    if (settings_.derivative_skip <= 0)  // the task's hint, else the node's default (config/mpc.yaml)
+      settings_.derivative_skip = defaults.numbers.count("derivative_skip")
+                                      ? static_cast<int>(paramNumber(task, defaults, "derivative_skip", 1, 100))
+                                      : PlannerSettings{}.derivative_skip;
     settings_.synergies = variant.synergies;
     PlanningModelSettings ms;
     ms.timestep = settings_.dt;
@@ -659,6 +663,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> sweep;  // fixed latencies [s] for iLQG on every task
   PlannerSettings overrides;       // horizon, dt <= 0: the task's hints
   overrides.horizon = overrides.dt = -1;
+  overrides.derivative_skip = -1;
   int only_trial = -1;  // >= 0: run this trial of the seeded set alone (its traces are written)
   std::string out_dir = ".", tasks_arg = "catch,relocate,type", variants_arg = "ilqg,sampling,nosyn,pneumatic";
   for (int i = 1; i < argc; ++i) {

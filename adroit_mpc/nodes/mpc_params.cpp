@@ -102,7 +102,7 @@ MpcParams readParams(const ros::NodeHandle& pnh) {
   if (s.horizon < 2 * s.dt) p.fail("horizon", "must span at least two knots of ~dt");
   s.iterations = p.integer("iterations", s.iterations, 1, 100);
   s.synergies = p.boolean("synergies", s.synergies);
-  s.derivative_skip = p.integer("derivative_skip", s.derivative_skip, 1, 100);
+  s.derivative_skip = p.integer("derivative_skip", static_cast<int>(hint("derivative_skip", s.derivative_skip)), 1, 100);
   s.samples = p.integer("samples", s.samples, 1, 4096);
   s.noise_scale = p.number("noise_scale", s.noise_scale, 0.0, 10.0);
   out.feedback_scale = p.number("feedback_scale", out.feedback_scale, 0.0, 1.0);

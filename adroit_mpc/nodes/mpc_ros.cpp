@@ -152,11 +152,12 @@ void MpcNode::start() {
     planner_thread_ = std::thread(&MpcNode::plannerLoop, this);
     control_thread_ = std::thread(&MpcNode::controlLoop, this);
   }
-  ROS_INFO("adroit_mpc: task %s, planner %s, %s mode%s, horizon %.3f s at dt %.4f s, %d iteration(s), synergies %s, "
-           "model %s",
+  ROS_INFO("adroit_mpc: task %s, planner %s, %s mode%s, horizon %.3f s at dt %.4f s, derivatives at every %d. knot, "
+           "%d iteration(s), synergies %s, model %s",
            task_name_.c_str(), params_.planner.c_str(), params_.force_mode ? "force" : "pneumatic",
            params_.lockstep ? " (lockstep)" : "", params_.settings.horizon, params_.settings.dt,
-           params_.settings.iterations, synergy_dims_ > 0 ? "on" : "off", params_.model_file.c_str());
+           params_.settings.derivative_skip, params_.settings.iterations, synergy_dims_ > 0 ? "on" : "off",
+           params_.model_file.c_str());
 }
 
 void MpcNode::stop() {

@@ -7,10 +7,11 @@ namespace adroit_mpc {
 TaskParams RelocateTask::defaults() {
   TaskParams p;
   p.strings = {{"scene", "ball"}, {"object_body", "object"}, {"object_joint", "object_root"},
-               {"grasp_site", "S_grasp"}, {"release_keyframe", "rest"}, {"arm_joint_prefix", "ARJ"}};
+               {"grasp_site", "S_grasp"}, {"release_keyframe", "rest"}, {"arm_joint_prefix", "ARJ"},
+               {"wrist_joint_prefix", "WRJ"}};
   p.numbers = {{"w_object_velocity", 0.5}, {"w_goal_position", 10.0}, {"w_goal_orientation", 0.0},
                {"w_grasp", 1.0},           {"w_control", 0.1},       {"w_synergy", 0.08},
-               {"w_release_posture", 0.5}, {"w_arm_posture", 1.0},
+               {"w_release_posture", 0.5}, {"w_arm_posture", 1.0}, {"w_wrist_posture", 5.0},
                {"terminal_scale", 10.0},   {"velocity_angular_scale", 0.035},
                {"position_smoothing", 0.02}, {"grasp_smoothing", 0.02}, {"goal_tolerance", 0.02},
                {"reach_radius", 0.25},
@@ -39,10 +40,12 @@ RelocateTask::RelocateTask(const TaskParams& params) : ObjectTaskBase("relocate"
   const std::string task = "relocate";
   w_release_posture_ = weights_.index("w_release_posture");
   w_arm_posture_ = weights_.index("w_arm_posture");
+  w_wrist_posture_ = weights_.index("w_wrist_posture");
   goal_tolerance_ = paramNumber(task, p, "goal_tolerance", 0, 1);
   reach_radius_ = paramNumber(task, p, "reach_radius", 0.01, 10);
   release_keyframe_ = paramString(task, p, "release_keyframe");
   arm_joint_prefix_ = paramString(task, p, "arm_joint_prefix");
+  wrist_joint_prefix_ = paramString(task, p, "wrist_joint_prefix");
   hold_position_ = paramVector3(task, p, "hold_position");
   std::string why;
   if (!checkGoal(hold_position_, paramQuaternion(task, p, "hold_quat"), workspace_, &hold_orientation_, &why))
@@ -63,8 +66,11 @@ void RelocateTask::bind(const mjModel* model, int synergy_dims) {
     throw std::invalid_argument("task relocate: the model has no keyframe '" + release_keyframe_ +
                                 "' (parameter release_keyframe)");
   robot_joints_ = JointList::where(model, [](const std::string&) { return true; });
-  const std::string prefix = arm_joint_prefix_;
-  arm_joints_ = JointList::where(model, [&prefix](const std::string& name) { return name.rfind(prefix, 0) == 0; });
+  const auto starting = [model](const std::string& prefix) {
+    return JointList::where(model, [&prefix](const std::string& name) { return name.rfind(prefix, 0) == 0; });
+  };
+  arm_joints_ = starting(arm_joint_prefix_);
+  wrist_joints_ = starting(wrist_joint_prefix_);
   const auto targets = [&](const JointList& joints) {
     std::vector<double> q(joints.size());
     for (int i = 0; i < joints.size(); ++i) q[i] = model->key_qpos[key * model->nq + joints.qpos_adr[i]];
@@ -72,6 +78,7 @@ void RelocateTask::bind(const mjModel* model, int synergy_dims) {
   };
   rest_targets_ = targets(robot_joints_);
   arm_targets_ = targets(arm_joints_);
+  wrist_targets_ = targets(wrist_joints_);
   unit_scales_.assign(robot_joints_.size(), 1.0);
 }
 
@@ -141,6 +148,10 @@ double RelocateTask::extraStateCost(const mjModel* m, const mjData* d, double sc
   if (arm_joints_.size() > 0) {
     jointResidual(m, d, arm_joints_, arm_targets_.data(), unit_scales_.data(), derivatives, buf);
     cost += addResidualCost(scale * weights_[w_arm_posture_], Norm::quadratic(), buf, out);
+  }
+  if (wrist_joints_.size() > 0 && weights_[w_wrist_posture_] > 0) {
+    jointResidual(m, d, wrist_joints_, wrist_targets_.data(), unit_scales_.data(), derivatives, buf);
+    cost += addResidualCost(scale * weights_[w_wrist_posture_], Norm::quadratic(), buf, out);
   }
   if (phase_ == Phase::kRelease) {
     jointResidual(m, d, robot_joints_, rest_targets_.data(), unit_scales_.data(), derivatives, buf);

@@ -342,7 +342,29 @@ TEST_F(RelocateOnBall, ArmPostureTermHoldsTheArmAndOnlyTheArm) {
   EXPECT_GT(added("ARJ3", 0.2), 0.01);
   EXPECT_GT(added("ARJ1", -0.2), 0.01);
   EXPECT_NEAR(added("FFJ2", 0.5), 0.0, 1e-12);  // a finger is free to curl
-  EXPECT_NEAR(added("WRJ0", 0.3), 0.0, 1e-12);  // and the wrist to turn
+  EXPECT_NEAR(added("WRJ0", 0.3), 0.0, 1e-12);  // the wrist has its own term
+}
+
+TEST_F(RelocateOnBall, WristPostureTermKeepsThePalmLevelAndOnlyThat) {
+  auto scratch = task->makeScratch(model.get());
+  const Eigen::VectorXd u = Eigen::VectorXd::Zero(model->nu + kSynergies);
+  const auto added = [&](const char* joint, double by, double weight) {
+    setKeyframe(model.get(), data.get(), "rest");
+    data->qpos[model->jnt_qposadr[mj_name2id(model.get(), mjOBJ_JOINT, joint)]] += by;
+    mj_forward(model.get(), data.get());
+    placeObject(graspSite());
+    task->setWeight("w_wrist_posture", weight);
+    const double on = task->runningCost(model.get(), data.get(), u, 0.0, *scratch);
+    task->setWeight("w_wrist_posture", 0.0);
+    const double off = task->runningCost(model.get(), data.get(), u, 0.0, *scratch);
+    return on - off;
+  };
+  EXPECT_NEAR(added("WRJ0", 0.0, 5.0), 0.0, 1e-12);
+  EXPECT_GT(added("WRJ0", 0.3, 5.0), 0.01);
+  EXPECT_GT(added("WRJ1", -0.2, 5.0), 0.01);
+  EXPECT_NEAR(added("WRJ0", 0.3, 10.0), 2 * added("WRJ0", 0.3, 5.0), 1e-9);  // linear in its weight
+  EXPECT_NEAR(added("ARJ1", 0.2, 5.0), 0.0, 1e-12);  // the arm is the other term's
+  EXPECT_NEAR(added("FFJ2", 0.5, 5.0), 0.0, 1e-12);  // a finger is free to curl
 }
 
 TEST_F(RelocateOnBall, AnObjectOutOfReachIsLeftAlone) {

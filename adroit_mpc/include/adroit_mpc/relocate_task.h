@@ -8,7 +8,8 @@
 //             the fingers open and leave the object on the palm.
 // In every phase a small posture term draws the arm joints (arm_joint_prefix) to the
 // release keyframe: an object position leaves the arm redundant, and without it the arm drifts
-// through its null space until the hand loses the object.
+// through its null space until the hand loses the object. A second one draws the wrist joints
+// (wrist_joint_prefix) there: the palm stays level, so the goal is reached with the arm.
 // An object further than reach_radius from the grasp site (dropped to the floor, or not yet
 // placed) switches the goal and grasp terms off until it is back within reach: the hand waits
 // at rest instead of straining after it.
@@ -56,15 +57,15 @@ class RelocateTask : public ObjectTaskBase {
   Eigen::Quaterniond hold_orientation_;
   double goal_tolerance_, reach_radius_;
   bool in_reach_ = true;
-  int w_release_posture_, w_arm_posture_;
-  std::string release_keyframe_, arm_joint_prefix_;
+  int w_release_posture_, w_arm_posture_, w_wrist_posture_;
+  std::string release_keyframe_, arm_joint_prefix_, wrist_joint_prefix_;
   // observe() bookkeeping (node side)
   bool phase_reported_ = false;
   Phase reported_phase_ = Phase::kHold;
   bool goal_reached_reported_ = false;
-  // Resolved by bind(): all robot joints (release posture) and the arm's (arm posture).
-  JointList robot_joints_, arm_joints_;
-  std::vector<double> rest_targets_, arm_targets_, unit_scales_;
+  // Resolved by bind(): all robot joints (release posture), the arm's and the wrist's (postures).
+  JointList robot_joints_, arm_joints_, wrist_joints_;
+  std::vector<double> rest_targets_, arm_targets_, wrist_targets_, unit_scales_;
 };
 
 }  // namespace adroit_mpc

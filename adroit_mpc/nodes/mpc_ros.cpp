@@ -152,7 +152,7 @@ void MpcNode::start() {
     planner_thread_ = std::thread(&MpcNode::plannerLoop, this);
     control_thread_ = std::thread(&MpcNode::controlLoop, this);
   }
-  ROS_INFO("adroit_mpc: task %s, planner %s, %s mode%s, horizon %.3f s at dt %.4f s, derivatives at every %d. knot, "
+  ROS_INFO("adroit_mpc: task %s, planner %s, %s mode%s, horizon %.3f s at dt %.4f s, derivatives every %d knot(s), "
            "%d iteration(s), synergies %s, model %s",
            task_name_.c_str(), params_.planner.c_str(), params_.force_mode ? "force" : "pneumatic",
            params_.lockstep ? " (lockstep)" : "", params_.settings.horizon, params_.settings.dt,

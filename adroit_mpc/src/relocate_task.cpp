@@ -143,20 +143,15 @@ std::vector<TaskEvent> RelocateTask::observe(const mjModel* m, const mjData* d, 
 
 double RelocateTask::extraStateCost(const mjModel* m, const mjData* d, double scale, ResidualBuffer& buf,
                                     CostDerivatives* out) const {
-  const bool derivatives = out != nullptr;
-  double cost = 0;
-  if (arm_joints_.size() > 0) {
-    jointResidual(m, d, arm_joints_, arm_targets_.data(), unit_scales_.data(), derivatives, buf);
-    cost += addResidualCost(scale * weights_[w_arm_posture_], Norm::quadratic(), buf, out);
-  }
-  if (wrist_joints_.size() > 0 && weights_[w_wrist_posture_] > 0) {
-    jointResidual(m, d, wrist_joints_, wrist_targets_.data(), unit_scales_.data(), derivatives, buf);
-    cost += addResidualCost(scale * weights_[w_wrist_posture_], Norm::quadratic(), buf, out);
-  }
-  if (phase_ == Phase::kRelease) {
-    jointResidual(m, d, robot_joints_, rest_targets_.data(), unit_scales_.data(), derivatives, buf);
-    cost += addResidualCost(scale * weights_[w_release_posture_], Norm::quadratic(), buf, out);
-  }
+  // A quadratic pull of some joints towards their release-keyframe angles (none at weight 0).
+  const auto posture = [&](const JointList& joints, const std::vector<double>& targets, double weight) {
+    if (joints.size() == 0 || !(weight > 0)) return 0.0;
+    jointResidual(m, d, joints, targets.data(), unit_scales_.data(), out != nullptr, buf);
+    return addResidualCost(scale * weight, Norm::quadratic(), buf, out);
+  };
+  double cost = posture(arm_joints_, arm_targets_, weights_[w_arm_posture_]) +
+                posture(wrist_joints_, wrist_targets_, weights_[w_wrist_posture_]);
+  if (phase_ == Phase::kRelease) cost += posture(robot_joints_, rest_targets_, weights_[w_release_posture_]);
   return cost;
 }
 

@@ -1,4 +1,4 @@
-// runInBackground and enterFifo, each case in a forked child so that the test process keeps
+// setThreadNice and enterFifo, each case in a forked child so that the test process keeps
 // its own scheduling. The child reports through its exit status (0 = as expected).
 #include <gtest/gtest.h>
 #include <pthread.h>
@@ -13,6 +13,7 @@
 #include <functional>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "adroit_core/scheduling.h"
 
@@ -44,25 +45,28 @@ int autogroupNice() {
 
 }  // namespace
 
-TEST(Scheduling, BackgroundReachesThreadsStartedBeforeAndAfterButNotTheSessionsAutogroup) {
+TEST(Scheduling, ThreadNiceReachesTheCallerAndItsNewThreadsOnly) {
   const int code = inChild([] {
     if (setsid() < 0) return 10;  // this child leads its own session, as under roslaunch
     const int autogroup_before = autogroupNice();
+    const int nice_before = threadNice();
+    if (nice_before >= 13) return 16;  // the case needs a thread above 13 to start from
     std::atomic<bool> go{false};
     std::atomic<int> earlier_nice{-1};
-    std::thread earlier([&] {
+    std::thread earlier([&] {  // e.g. roscpp's receiving threads: started before, keep their weight
       while (!go) std::this_thread::sleep_for(std::chrono::milliseconds(1));
       earlier_nice = threadNice();
     });
-    const adroit::BackgroundResult r = adroit::runInBackground(13);
+    std::string error;
+    const bool ok = adroit::setThreadNice(13, &error);
     go = true;
     earlier.join();
     int later_nice = -1;
-    std::thread later([&] { later_nice = threadNice(); });
+    std::thread later([&] { later_nice = threadNice(); });  // e.g. the optimiser's workers
     later.join();
-    if (!r.error.empty()) return 11;
-    if (r.threads != 2) return 12;  // this thread and `earlier`
-    if (threadNice() != 13 || earlier_nice != 13) return 13;
+    if (!ok || !error.empty()) return 11;
+    if (threadNice() != 13) return 12;
+    if (earlier_nice != nice_before) return 13;
     if (later_nice != 13) return 14;
     if (autogroupNice() != autogroup_before) return 15;  // the session keeps its weight
     return 0;
@@ -70,36 +74,12 @@ TEST(Scheduling, BackgroundReachesThreadsStartedBeforeAndAfterButNotTheSessionsA
   EXPECT_EQ(code, 0);
 }
 
-TEST(Scheduling, FifoThreadKeepsItsPolicyWhenTheProcessGoesToTheBackground) {
-  const int code = inChild([] {
-    std::atomic<int> state{0};  // 1: FIFO entered (or refused: 3), 2: background done
-    std::atomic<int> policy{-1};
-    std::thread control([&] {
-      state = adroit::enterFifo(1, nullptr) ? 1 : 3;
-      while (state != 2) std::this_thread::sleep_for(std::chrono::milliseconds(1));
-      policy = sched_getscheduler(0);
-    });
-    while (state == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
-    if (state == 3) {  // no rtprio permitted here: nothing to check
-      state = 2;
-      control.join();
-      return kFifoRefused;
-    }
-    adroit::runInBackground(19);
-    state = 2;
-    control.join();
-    return policy == SCHED_FIFO ? 0 : 50;
-  });
-  if (code == kFifoRefused) GTEST_SKIP() << "SCHED_FIFO not permitted here (needs root or an rtprio limit)";
-  EXPECT_EQ(code, 0);
-}
-
 TEST(Scheduling, NiceOutsideTheBackgroundRangeIsRefusedAndChangesNothing) {
   const int code = inChild([] {
     const int before = threadNice();
     for (int bad : {-1, 20}) {
-      const adroit::BackgroundResult r = adroit::runInBackground(bad);
-      if (r.error.find("not in [0, 19]") == std::string::npos || r.threads != 0) return 30;
+      std::string error;
+      if (adroit::setThreadNice(bad, &error) || error.find("not in [0, 19]") == std::string::npos) return 30;
     }
     return threadNice() == before ? 0 : 31;
   });
@@ -120,6 +100,40 @@ TEST(Scheduling, FifoIsEnteredAndLeftOrRefusedWithAReason) {
       return 44;  // refused (no rtprio limit) must say why
     }
     return 0;
+  });
+  EXPECT_EQ(code, 0);
+}
+
+TEST(Scheduling, AnotherThreadIsFoundByItsIdAndPutUnderFifo) {
+  const int code = inChild([] {
+    const std::vector<int> before = adroit::threadIds();
+    if (before.size() != 1 || before[0] != getpid()) return 50;  // the child has one thread
+    std::atomic<int> tid{0};
+    std::atomic<bool> stop{false};
+    std::thread other([&] {  // e.g. a thread roscpp started
+      tid = static_cast<int>(syscall(SYS_gettid));
+      while (!stop) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    });
+    while (tid == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    const std::vector<int> after = adroit::threadIds();
+    int result = 0;
+    std::string error;
+    if (after.size() != 2 || after[1] != tid) {
+      result = 51;
+    } else if (adroit::fifoPriority(tid) != 0) {
+      result = 52;
+    } else if (adroit::enterFifoThread(tid, 2, &error)) {
+      if (adroit::fifoPriority(tid) != 2) result = 53;
+      if (adroit::fifoPriority(getpid()) != 0) result = 54;  // the caller keeps its scheduling
+    } else if (error.empty()) {
+      result = 55;  // refused (no rtprio limit) must say why
+    }
+    stop = true;
+    other.join();
+    if (result == 0 && adroit::fifoPriority(tid) != -1) result = 56;  // gone
+    error.clear();
+    if (result == 0 && (adroit::enterFifoThread(tid, 2, &error) || error.empty())) result = 57;
+    return result;
   });
   EXPECT_EQ(code, 0);
 }

@@ -1,12 +1,21 @@
 // adroit_ros against a real master: parameters of each type, the one-line errors, scene
-// resolution, the diagnostics builder and the rejection counters.
+// resolution, the diagnostics builder, the rejection counters and the real-time path (roscpp's
+// threads and a callback queue under SCHED_FIFO).
 #include <gtest/gtest.h>
 #include <ros/ros.h>
+#include <sched.h>
+#include <std_msgs/Int32.h>
+#include <sys/syscall.h>
+#include <unistd.h>
 
+#include <atomic>
+#include <chrono>
 #include <thread>
 
 #include "adroit_ros/diagnostics.h"
 #include "adroit_ros/params.h"
+#include "adroit_ros/realtime.h"
+#include "adroit_core/scheduling.h"
 
 using adroit::rosutil::ParameterError;
 using adroit::rosutil::Params;
@@ -130,11 +139,99 @@ TEST(RejectionCounters, CountsExactlyFromSeveralThreads) {
   EXPECT_EQ(s.status().values[2].value, "50000");
 }
 
+// Threads of this process under SCHED_FIFO at `priority`.
+int threadsAtFifo(int priority) {
+  int n = 0;
+  for (int id : adroit::threadIds()) n += adroit::fifoPriority(id) == priority;
+  return n;
+}
+
+// The test needs SCHED_FIFO (root, or an rtprio limit): without it the refusal must say why.
+bool fifoPermitted() {
+  std::string error;
+  std::thread probe([&] { adroit::enterFifo(1, &error); });
+  probe.join();
+  return error.empty();
+}
+
+TEST(RealtimePath, RoscppsThreadsGoUnderFifoAndTheCallerKeepsItsScheduling) {
+  std::string error;
+  const bool ok = adroit::rosutil::fifoRosThreads(7, &error);
+  if (!fifoPermitted()) {
+    EXPECT_FALSE(ok);
+    EXPECT_FALSE(error.empty());
+    return;
+  }
+  ASSERT_TRUE(ok) << error;
+  // The socket poll thread, the XML-RPC server, rosout's publisher, the internal queue.
+  EXPECT_GE(threadsAtFifo(7), 3);
+  EXPECT_EQ(adroit::fifoPriority(static_cast<int>(syscall(SYS_gettid))), 0);
+  // Messages still flow (through the now real-time poll thread).
+  ros::NodeHandle nh;
+  std::atomic<int> got{0};
+  ros::Subscriber sub = nh.subscribe<std_msgs::Int32>("rt_ping", 10, [&](const std_msgs::Int32::ConstPtr& m) { got = m->data; });
+  ros::Publisher pub = nh.advertise<std_msgs::Int32>("rt_ping", 10);
+  std_msgs::Int32 m;
+  m.data = 42;
+  for (int i = 0; i < 200 && got != 42; ++i) {
+    pub.publish(m);
+    ros::spinOnce();
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  EXPECT_EQ(got, 42);
+}
+
+TEST(RealtimePath, AFifoQueueRunsItsCallbacksOnItsOwnThreadUnderFifo) {
+  adroit::rosutil::FifoCallbackQueue fifo;
+  EXPECT_EQ(fifo.priority(), -1);
+  fifo.start(9);
+  ros::NodeHandle nh;
+  nh.setCallbackQueue(fifo.queue());
+  std::atomic<int> policy{-1}, priority{-1}, got{0};
+  std::atomic<long> caller{0};
+  ros::Subscriber sub = nh.subscribe<std_msgs::Int32>("rt_queue", 10, [&](const std_msgs::Int32::ConstPtr& m) {
+    policy = sched_getscheduler(0);
+    priority = adroit::fifoPriority(static_cast<int>(syscall(SYS_gettid)));
+    caller = syscall(SYS_gettid);
+    got = m->data;
+  });
+  ros::NodeHandle plain;
+  ros::Publisher pub = plain.advertise<std_msgs::Int32>("rt_queue", 10);
+  std_msgs::Int32 m;
+  m.data = 7;
+  for (int i = 0; i < 200 && got != 7; ++i) {  // nobody spins the global queue: the queue's own thread runs it
+    pub.publish(m);
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  ASSERT_EQ(got, 7);
+  EXPECT_NE(caller, syscall(SYS_gettid));
+  if (fifoPermitted()) {
+    EXPECT_EQ(fifo.priority(), 9);
+    EXPECT_EQ(policy, SCHED_FIFO);
+    EXPECT_EQ(priority, 9);
+    EXPECT_TRUE(fifo.refusal().empty());
+  } else {
+    EXPECT_EQ(fifo.priority(), 0);
+    EXPECT_FALSE(fifo.refusal().empty());
+  }
+  sub.shutdown();
+  const auto start = std::chrono::steady_clock::now();
+  {
+    adroit::rosutil::FifoCallbackQueue normal;  // priority 0: normal scheduling, joined at once
+    normal.start(0);
+    while (normal.priority() < 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    EXPECT_EQ(normal.priority(), 0);
+    EXPECT_TRUE(normal.refusal().empty());
+  }
+  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::milliseconds(500));
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   testing::InitGoogleTest(&argc, argv);
   ros::init(argc, argv, "test_adroit_ros");
+  adroit::rosutil::startRos();  // before the first NodeHandle: roscpp's threads are known
   ros::NodeHandle nh;  // keeps the node up for the tests
   return RUN_ALL_TESTS();
 }

@@ -1,7 +1,7 @@
 // CPU scheduling for the nodes (Linux): SCHED_FIFO for the threads that must run on time
 // (the driver's simulation and publisher threads, the pools' tick and publisher threads, the
-// MPC's control loop), and a background weight for a whole process whose other threads may
-// run late (the MPC's optimiser).
+// MPC's control loop), and a background weight for threads that may run late (the MPC's
+// optimiser).
 //
 // Why SCHED_FIFO and not nice values: with autogroup scheduling (the default of Debian's
 // kernel) a nice value only ranks a thread against the threads of its own session, and
@@ -12,6 +12,7 @@
 #pragma once
 
 #include <string>
+#include <vector>
 
 namespace adroit {
 
@@ -22,16 +23,19 @@ bool enterFifo(int priority, std::string* error);
 // Back to normal scheduling (SCHED_OTHER).
 void leaveFifo();
 
-// What runInBackground did.
-struct BackgroundResult {
-  int threads = 0;    // threads set to the nice value (every thread of the process)
-  std::string error;  // empty when every thread was set
-};
+// The ids of this process's threads (Linux thread ids, /proc/self/task), in ascending order.
+std::vector<int> threadIds();
+// Puts the thread `tid` of this process under SCHED_FIFO at `priority`; false, with the
+// reason in *error, when the system does not permit it or the thread is gone.
+bool enterFifoThread(int tid, int priority, std::string* error);
+// The SCHED_FIFO priority of thread `tid` (0: another policy, -1: no such thread).
+int fifoPriority(int tid);
 
-// Lowers the whole process to `nice` (0-19): every thread it has now (Linux keeps a nice
-// value per thread, so the launch-prefix `nice` and setpriority(PRIO_PROCESS, getpid())
-// reach only the main thread's descendants) and, through inheritance, every thread they
-// start. Threads under SCHED_FIFO are unaffected.
-BackgroundResult runInBackground(int nice);
+// Lowers the calling thread to `nice` (0-19); threads it starts afterwards inherit it, the
+// process's other threads keep theirs (Linux keeps a nice value per thread). Within a session
+// (autogroup) a niced thread then yields to every other thread of its process at once, e.g.
+// an optimiser to the threads that receive its input. False, with the reason in *error, for
+// a value outside [0, 19] or when the system refuses; nothing changes then.
+bool setThreadNice(int nice, std::string* error);
 
 }  // namespace adroit

@@ -37,6 +37,7 @@
 #include <thread>
 #include <vector>
 
+#include "adroit_core/scheduling.h"
 #include "adroit_core/thread_pool.h"
 #include "adroit_core/timing_stats.h"
 #include "adroit_pneumatics/excitation.h"
@@ -59,10 +60,10 @@ std::vector<std::string> g_results;
 double g_limit = 2.0;
 std::string g_out_dir = "pneumatics_bench_out";  // CSV files and plots
 // The tracking tables' and the pool timing's iLQG: the shipped pools' settings
-// (config/pools.yaml runs two iterations per tick), changed with --set.
+// (config/pools.yaml runs one iteration per tick), changed with --set.
 IlqgParams shippedPoolParams() {
   IlqgParams p;
-  p.iterations = 2;
+  p.iterations = 1;
   return p;
 }
 IlqgParams g_ilqg = shippedPoolParams();
@@ -421,7 +422,7 @@ Tracking track(PressureController& ctl, const Rig& rig, const Profile& prof, dou
     const double t = k * kTick;
     for (int i = 0; i <= horizon; ++i)
       ref[i] = prof.ref(prof.future_known ? t + i * kTick : t, 7);  // unknown future: hold current
-    double u = ctl.update(t, c.measured(), w, c.inputs(), ref.data(), horizon + 1, kTick, nullptr);
+    double u = ctl.update(t, c.measured(), w, c.inputs(), ref.data(), horizon + 1, kTick, nullptr, true);
     if (!std::isfinite(u)) u = -5.0;  // never let a non-finite command reach the valve
     w = u;
     out.command.push_back(u);
@@ -466,7 +467,7 @@ double stepFloorRmse(const Rig& rig, const Profile& prof, double seconds, const 
     if (racing != 0) {
       u = racing * limit;
     } else if (k % kSubs == 0) {
-      const double v = hold.update(t, c.measured(), u, c.inputs(), &level, 1, kTick, nullptr);
+      const double v = hold.update(t, c.measured(), u, c.inputs(), &level, 1, kTick, nullptr, true);
       if (std::isfinite(v)) u = v;
     }
     c.subStep(u);
@@ -482,9 +483,53 @@ double stepFloorRmse(const Rig& rig, const Profile& prof, double seconds, const 
   return std::sqrt(sq / static_cast<double>(subs - skip));
 }
 
+// The machine's own speed while a layout runs: a thread under SCHED_FIFO (so the pools' threads
+// never preempt it) does a fixed piece of work every 5 ms and times it against the fastest it
+// ever took. A shared virtual machine can run all its threads several times slower for a while
+// (this development VM: 4-15x for 100-200 ms about every 1.5 s, with nothing else running);
+// then a pool's solve takes as many times longer, which no wake-up lag of a bare thread shows.
+class SlowdownProbe {
+ public:
+  SlowdownProbe() : thread_([this] { run(); }) {}
+  ~SlowdownProbe() { stop(); }
+  void stop() {
+    running_ = false;
+    if (thread_.joinable()) thread_.join();
+  }
+  // Slowdowns (work time / fastest work time), one per 5 ms; empty if SCHED_FIFO was refused.
+  const adroit::SampleStats& slowdowns() const { return slowdowns_; }
+
+ private:
+  static double work() {  // ~50 us of arithmetic at full speed on this VM
+    volatile double x = 1.0;
+    for (int i = 0; i < 12000; ++i) x = x * 1.0000001 + 1e-9;
+    return x;
+  }
+  void run() {
+    std::string error;
+    if (!adroit::enterFifo(1, &error)) return;
+    double fastest = std::numeric_limits<double>::infinity();
+    std::vector<double> times;
+    auto next = std::chrono::steady_clock::now();
+    while (running_) {
+      adroit::Stopwatch sw;
+      work();
+      const double t = sw.elapsed();
+      fastest = std::min(fastest, t);
+      times.push_back(t);
+      next += std::chrono::microseconds(5000);
+      std::this_thread::sleep_until(next);
+    }
+    for (double t : times) slowdowns_.add(t / fastest);
+  }
+  std::atomic<bool> running_{true};
+  adroit::SampleStats slowdowns_;
+  std::thread thread_;
+};
+
 // ---------------------------------------------------------------- 4. pool timing
 struct PoolTiming {
-  adroit::SampleStats solve, lag;
+  adroit::SampleStats solve, lag, slowdown;
   int missed = 0;
 };
 
@@ -514,6 +559,7 @@ PoolTiming poolTiming(const ParametricModel& model, const IlqgParams& params, in
   const auto period = std::chrono::microseconds(5000);
   const auto start = std::chrono::steady_clock::now() + std::chrono::milliseconds(20);
   const int cycles = static_cast<int>(seconds / kTick);
+  SlowdownProbe probe;
   for (int p = 0; p < pools; ++p) {
     threads.emplace_back([&, p] {
       const auto phase = staggered ? period * p / pools : std::chrono::microseconds(0);
@@ -534,7 +580,7 @@ PoolTiming poolTiming(const ParametricModel& model, const IlqgParams& params, in
           for (int k = 0; k <= 100; ++k) r[k] = 350e3 + 150e3 * std::sin(2 * kPi * 2.0 * (t + k * kTick) + i);
           ParametricInputs in;
           in.volume = 1.2e-6;
-          out[j] = ctl[i]->update(t, state[j], command[i], in, r, 101, kTick, nullptr);
+          out[j] = ctl[i]->update(t, state[j], command[i], in, r, 101, kTick, nullptr, true);
         };
         if (workers) {
           workers->parallelFor(per, solveOne);
@@ -552,7 +598,9 @@ PoolTiming poolTiming(const ParametricModel& model, const IlqgParams& params, in
     });
   }
   for (auto& th : threads) th.join();
+  probe.stop();
   PoolTiming all;
+  all.slowdown = probe.slowdowns();
   for (auto& s : stats) {
     for (double v : s.solve.samples()) all.solve.add(v);
     for (double v : s.lag.samples()) all.lag.add(v);
@@ -893,6 +941,22 @@ int main(int argc, char** argv) {
         result("pool_policy_lag_p99_" + cfg, t.lag.summary().p99 * 1e3, "ms", "<=",
                reference.lag.summary().p99 * 1e3 + 1.0);
         result("pool_missed_resolves_" + cfg, t.missed, "cycles", "<=", 0);
+        // The bound the machine set in this run: the bare thread only wakes up, so it does not
+        // see a machine that computes slower for a while; the probe does.
+        if (t.slowdown.samples().empty()) {
+          std::printf("  (no slowdown probe: SCHED_FIFO not permitted)\n");
+        } else {
+          const adroit::Summary s = t.slowdown.summary();
+          std::size_t slow = 0;
+          for (double x : t.slowdown.samples()) slow += x > 2.0;
+          const double solve = t.solve.summary().median * 1e3, work = solve * pools;
+          const double capacity = std::thread::hardware_concurrency() * kTick * 1e3;
+          std::printf("  bound: the machine computed up to %.1fx slower during %s (p99 %.1fx; %.1f %% of the time\n"
+                      "  over 2x): a pool's median solve of %.3f ms then takes %.2f ms (p99 slowdown), and the\n"
+                      "  layout's %.2f ms of work per tick %.1f ms at the worst, of the %.0f ms the cores have\n",
+                      s.max, cfg.c_str(), s.p99, 100.0 * slow / t.slowdown.samples().size(), solve, solve * s.p99,
+                      work, work * s.max, capacity);
+        }
       }
     }
     std::printf("  (the lag targets are the bare thread's p99 + 1 ms)\n\n");

@@ -5,12 +5,15 @@
 
 #include <ros/ros.h>
 
+#include "adroit_ros/realtime.h"
+
 namespace adroit::pneumatics {
 std::shared_ptr<void> startPool(ros::NodeHandle nh, ros::NodeHandle pnh, const std::string& name);  // pool_ros.cpp
 }
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "pool");
+  adroit::rosutil::startRos();  // roscpp's threads known: the pool puts them under SCHED_FIFO
   ros::NodeHandle nh, pnh("~");
   std::shared_ptr<void> pool;
   try {

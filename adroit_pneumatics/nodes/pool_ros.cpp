@@ -3,17 +3,20 @@
 // valve commands at ~rate and diagnostics every ~diagnostics_period.
 //
 // Threads (the 200 Hz tick must never allocate, serialise or wait on another thread):
-//  * the callback queue (ros::spin in the node, the nodelet's single-threaded handle):
-//    actuator states and force references, validated by the pool and handed to the tick
-//    through lock-free hand-overs; the diagnostics timer;
+//  * the input queue (adroit_ros FifoCallbackQueue, under SCHED_FIFO one above the tick, as
+//    are roscpp's own threads in the pool node): actuator states and force references,
+//    validated by the pool and handed to the tick through lock-free hand-overs. At normal
+//    scheduling the states waited 50-100 ms behind busy SCHED_FIFO threads on two cores and
+//    the pools exhausted on stale states;
+//  * the node's queue (ros::spin in the node, the nodelet's handle): the diagnostics timer;
 //  * the tick thread: sleeps until the next period on the ROS clock (so it follows /clock
 //    under use_sim_time), runs CylinderPool::update and puts the commands into a
 //    preallocated slot (CommandSlot), then wakes the publisher with a semaphore post;
 //  * the publisher thread: builds the ValveCommand (by index, resolved once from the
 //    actuator-state order) and publishes it; roscpp allocates and serialises here.
-// Both run under SCHED_FIFO (~realtime_priority) when the system permits: the driver's
-// watchdog trips when a cylinder goes 50 ms without a command, and at normal scheduling
-// a busy node on the same two cores delayed the tick by up to 80 ms.
+// Both run under SCHED_FIFO (~realtime_priority, the publisher one above) when the system
+// permits: the driver's watchdog trips when a cylinder goes 50 ms without a command, and at
+// normal scheduling a busy node on the same two cores delayed the tick by up to 80 ms.
 #include <semaphore.h>
 
 #include <algorithm>
@@ -35,11 +38,13 @@
 #include <adroit_msgs/ValveCommand.h>
 #include <diagnostic_msgs/DiagnosticArray.h>
 
+#include "adroit_core/pi_mutex.h"
 #include "adroit_core/scheduling.h"
 #include "adroit_pneumatics/params_io.h"
 #include "adroit_pneumatics/pool.h"
 #include "adroit_ros/diagnostics.h"
 #include "adroit_ros/params.h"
+#include "adroit_ros/realtime.h"
 
 namespace adroit::pneumatics {
 
@@ -75,6 +80,7 @@ PoolOptions readOptions(const Params& p, const ros::NodeHandle& pnh) {
   o.ilqg.iterations = p.integer("ilqg/iterations", o.ilqg.iterations);
   o.ilqg.feedback_fraction = p.number("ilqg/feedback_fraction", o.ilqg.feedback_fraction);
   o.solve_every = p.integer("ilqg/solve_every", o.solve_every);
+  o.solve_budget = p.number("ilqg/solve_budget", o.solve_budget);
   o.ilqg.disturbance_gain = p.number("ilqg/disturbance_gain", o.ilqg.disturbance_gain);
   o.ilqg.disturbance_limit = p.number("ilqg/disturbance_limit", o.ilqg.disturbance_limit);
   o.ilqg.u_des_steady_state = p.boolean("ilqg/u_des_steady_state", o.ilqg.u_des_steady_state);
@@ -111,7 +117,7 @@ class PoolRos {
                      "reference_timeout", "state_timeout", "stamp_tolerance", "exhaust_volts", "ilqg", "pidf",
                      "diagnostics_period", "realtime_priority", "tick_phase", "tick_on_state"});
     p.checkKeys("ilqg", {"horizon", "dt", "alpha_p", "alpha_u", "alpha_w", "u_min", "u_max", "iterations",
-                         "feedback_fraction", "solve_every", "disturbance_gain", "disturbance_limit",
+                         "feedback_fraction", "solve_every", "solve_budget", "disturbance_gain", "disturbance_limit",
                          "u_des_steady_state", "measurement_gain", "measurement_band", "jump_threshold",
                          "jump_iterations"});
     p.checkKeys("pidf", {"kp", "ki", "kd", "filter_hz", "feedforward", "feedforward_advance", "u_min", "u_max"});
@@ -175,13 +181,24 @@ class PoolRos {
 
     command_pub_ = nh.advertise<adroit_msgs::ValveCommand>("/adroit/valve_command", 10);
     diag_pub_ = nh.advertise<diagnostic_msgs::DiagnosticArray>("/adroit/diagnostics", 10);
-    state_sub_ = nh.subscribe("/adroit/actuator_states", 10, &PoolRos::onState, this, ros::TransportHints().tcpNoDelay());
+    ros::NodeHandle input(nh);
+    input.setCallbackQueue(input_queue_.queue());
+    state_sub_ = input.subscribe("/adroit/actuator_states", 10, &PoolRos::onState, this, ros::TransportHints().tcpNoDelay());
     reference_sub_ =
-        nh.subscribe("/adroit/force_reference", 10, &PoolRos::onReference, this, ros::TransportHints().tcpNoDelay());
+        input.subscribe("/adroit/force_reference", 10, &PoolRos::onReference, this, ros::TransportHints().tcpNoDelay());
     diag_timer_ = nh.createWallTimer(ros::WallDuration(diag_period), &PoolRos::onDiagnostics, this);
     window_start_ = Clock::now();
 
     running_ = true;
+    input_queue_.start(realtime_priority_ > 0 ? realtime_priority_ + 1 : 0);
+    if (realtime_priority_ > 0) {
+      std::string error;
+      transport_fifo_ = rosutil::fifoRosThreads(realtime_priority_ + 1, &error);
+      if (!transport_fifo_)
+        ROS_WARN("%s: roscpp's threads keep normal scheduling (%s): on a busy machine actuator states may arrive "
+                 "late (the pool node, or the manager adroit_pneumatics/pool_manager, runs them under SCHED_FIFO)",
+                 name_.c_str(), error.c_str());
+    }
     publisher_ = std::thread(&PoolRos::publishLoop, this);
     tick_ = std::thread(&PoolRos::tickLoop, this);
     ROS_INFO("%s: %s pool of %zu cylinders at %.0f Hz: %s", name_.c_str(), controller_.c_str(), pool_->size(), rate,
@@ -190,6 +207,7 @@ class PoolRos {
 
   ~PoolRos() {
     running_ = false;
+    input_queue_.stop();
     sem_post(&state_ready_);  // a state-driven tick waits on it
     if (tick_.joinable()) tick_.join();
     sem_post(&command_ready_);
@@ -233,7 +251,10 @@ class PoolRos {
     const Verdict v = pool_->setReference(now, t0, msg->dt, msg->steps, msg->name, msg->force);
     if (!v.ok()) {
       reference_rejections_.count(counterIndex(v.reason));
-      last_reject_ = v.detail;
+      {
+        const std::lock_guard<PiMutex> lock(last_reject_mutex_);
+        last_reject_ = v.detail;
+      }
       ROS_ERROR_THROTTLE(1.0, "%s: rejected force reference (%s): %s", name_.c_str(), rejectReasonName(v.reason),
                          v.detail.c_str());
       return;
@@ -334,7 +355,10 @@ class PoolRos {
 
   // --- publisher thread ---------------------------------------------------------------
   void publishLoop() {
-    enterRealtime(realtime_priority_ - 1, "publisher");  // the tick first
+    // Above the ticks (its own and the other pools'): it only hands a finished command to
+    // roscpp. One below them, five ticks re-solving on a slowed-down machine kept the
+    // publishers from sending for 60 ms and the driver's watchdog tripped.
+    enterRealtime(realtime_priority_ > 0 ? realtime_priority_ + 1 : 0, "publisher");
     std::vector<std::uint16_t> index;
     while (running_) {
       timespec deadline;
@@ -365,7 +389,7 @@ class PoolRos {
     }
   }
 
-  // --- diagnostics (callback queue) ---------------------------------------------------
+  // --- diagnostics (the node's queue) -------------------------------------------------
   void onDiagnostics(const ros::WallTimerEvent&) {
     const auto t = Clock::now();
     const double window = std::chrono::duration<double>(t - window_start_).count();
@@ -373,6 +397,11 @@ class PoolRos {
     const PoolWindow w = pool_->takeWindow();
     const PoolCounters c = pool_->counters();
     const std::uint64_t rejected = reference_rejections_.total(), states_rejected = state_rejections_.total();
+    std::string last_reject;
+    {
+      const std::lock_guard<PiMutex> lock(last_reject_mutex_);
+      last_reject = last_reject_;
+    }
     const std::size_t n = pool_->size(), ex = pool_->exhausting();
 
     rosutil::StatusBuilder s(name_, "adroit_pneumatics pool");
@@ -382,7 +411,7 @@ class PoolRos {
       s.raise(diagnostic_msgs::DiagnosticStatus::WARN, "exhausting " + std::to_string(ex) + "/" + std::to_string(n) +
                                                            " cylinders (no valid reference or state)");
     if (rejected > last_rejected_)
-      s.raise(diagnostic_msgs::DiagnosticStatus::WARN, "rejected force references: " + last_reject_);
+      s.raise(diagnostic_msgs::DiagnosticStatus::WARN, "rejected force references: " + last_reject);
     if (states_rejected > last_states_rejected_)
       s.raise(diagnostic_msgs::DiagnosticStatus::WARN, "rejected actuator states");
     s.raise(diagnostic_msgs::DiagnosticStatus::OK,
@@ -398,6 +427,10 @@ class PoolRos {
     s.add("scheduling", realtime_priority_ == 0 ? "normal (~realtime_priority 0)"
                         : fifo_refused_         ? "normal (SCHED_FIFO not permitted)"
                                                 : "SCHED_FIFO " + std::to_string(realtime_priority_));
+    const int input_fifo = input_queue_.priority();
+    s.add("input_scheduling", input_fifo > 0 ? "SCHED_FIFO " + std::to_string(input_fifo) : std::string("normal"));
+    s.add("transport_scheduling", transport_fifo_ ? "SCHED_FIFO " + std::to_string(realtime_priority_ + 1)
+                                                   : std::string("normal"));
     s.add("publish_rate_hz", window > 0 ? (published - last_published_) / window : 0.0);
     last_published_ = published;
     s.add("ticks", c.ticks);
@@ -408,39 +441,46 @@ class PoolRos {
     s.add("policy_lag_p99_ms", w.lag.p99 * 1e3);
     s.add("tracking_rmse_N", w.force_rmse);
     s.add("tracking_rmse_kPa", w.pressure_rmse / 1e3);
-    s.add("references_accepted", references_accepted_);
-    s.add("references_ignored", references_ignored_);
-    s.add("references_clamped_negative", references_clamped_negative_);
+    s.add("references_accepted", references_accepted_.load(std::memory_order_relaxed));
+    s.add("references_ignored", references_ignored_.load(std::memory_order_relaxed));
+    s.add("references_clamped_negative", references_clamped_negative_.load(std::memory_order_relaxed));
     reference_rejections_.addTo(s, "references_rejected");
-    s.add("last_rejection", last_reject_);
+    s.add("last_rejection", last_reject);
     s.add("reference_timeouts", c.reference_timeouts);
     s.add("states_accepted", states_accepted_.load(std::memory_order_relaxed));
     s.add("states_unknown_name", states_unknown_name_.load(std::memory_order_relaxed));
     state_rejections_.addTo(s, "states_rejected");
     s.add("nonfinite_commands", c.nonfinite_commands);
     s.add("solver_rejections", c.solver_rejections);
+    s.add("solves_deferred", c.solves_deferred);
     s.publish(diag_pub_);
   }
 
-  std::string name_, controller_, cylinder_list_, last_reject_;
+  std::string name_, controller_, cylinder_list_;
+  PiMutex last_reject_mutex_;  // last_reject_: written by the input queue, read by the diagnostics
+  std::string last_reject_;
   std::unique_ptr<CylinderPool> pool_;
   std::unique_ptr<CommandSlot> slot_;
   ros::Duration period_;
   ros::Publisher command_pub_, diag_pub_;
+  // Actuator states and force references; declared before their subscribers, which remove
+  // their callbacks from it when they go.
+  rosutil::FifoCallbackQueue input_queue_;
   ros::Subscriber state_sub_, reference_sub_;
   ros::WallTimer diag_timer_;
+  std::atomic<bool> transport_fifo_{false};  // roscpp's threads under SCHED_FIFO
   std::thread tick_, publisher_;
   std::atomic<bool> running_{false};
   double tick_phase_ = 0.0;    // fraction of the period (latestTick)
   bool tick_on_state_ = false;  // tick when a state arrives (stateTickLoop) instead of on the grid
   sem_t state_ready_;          // posted by onState under ~tick_on_state
-  int realtime_priority_ = 15;  // tick thread; the publisher one below (0: normal scheduling)
+  int realtime_priority_ = 15;  // tick thread; the publisher, input queue and roscpp's threads one above (0: normal)
   std::atomic<bool> fifo_refused_{false};
   sem_t command_ready_;
   Clock::time_point window_start_;
-  // Input verdicts, counted on the callback queue (lock-free: read by the diagnostics).
+  // Input verdicts, counted on the input queue (lock-free: read by the diagnostics).
   rosutil::RejectionCounters reference_rejections_, state_rejections_;
-  std::uint64_t references_accepted_ = 0, references_ignored_ = 0, references_clamped_negative_ = 0;
+  std::atomic<std::uint64_t> references_accepted_{0}, references_ignored_{0}, references_clamped_negative_{0};
   std::atomic<std::uint64_t> states_accepted_{0}, states_unknown_name_{0}, published_{0};
   std::atomic<long long> state_received_ns_{0};  // steady clock of the last accepted state, 0 = none
   std::uint64_t last_published_ = 0, last_nonfinite_ = 0, last_rejected_ = 0, last_states_rejected_ = 0;

@@ -61,6 +61,8 @@ void PoolOptions::validate() const {
   if (controller == "ilqg") {
     ilqg.validate();
     if (solve_every < 1) throw std::invalid_argument("ilqg/solve_every: must be >= 1");
+    if (!(solve_budget >= 0) || !std::isfinite(solve_budget))
+      throw std::invalid_argument("ilqg/solve_budget: must be >= 0 (s; 0 = no budget)");
   } else if (controller == "pidf") {
     pidf.validate();
   } else {
@@ -260,9 +262,14 @@ const std::vector<double>& CylinderPool::update(double now) {
   const std::vector<State>& states = state_box_.front();
   std::size_t exhausting = 0;
   double solve_seconds = 0;
-  bool driven = false;
-  const double dt_ctrl = options_.controller == "ilqg" ? options_.ilqg.dt : 0.005;
-  for (std::size_t i = 0; i < size(); ++i) {
+  bool driven = false, deferred = false;
+  std::size_t next_first = first_;
+  const bool ilqg = options_.controller == "ilqg";
+  const double dt_ctrl = ilqg ? options_.ilqg.dt : 0.005;
+  const bool budgeted = ilqg && options_.solve_budget > 0;
+  const Stopwatch tick_watch;
+  for (std::size_t k = 0; k < size(); ++k) {
+    const std::size_t i = (first_ + k) % size();
     const Plan& plan = plans[i];
     const State& state = states[i];
     bool planned = plan.valid && plan.serial != expired_serial_[i];
@@ -277,9 +284,15 @@ const std::vector<double>& CylinderPool::update(double now) {
       resampleReference(plan.pressure.data(), static_cast<int>(plan.pressure.size()), plan.dt, now - plan.t0, dt_ctrl,
                         static_cast<int>(ref_buffer_.size()), ref_buffer_.data());
       ControlStats stats;
+      const bool may_solve = !budgeted || tick_watch.elapsed() < options_.solve_budget;
       const Stopwatch watch;  // whole controller call: solve (when due) + policy evaluation
       u = controllers_[i]->update(now, state.pressure, commands_[i], state.inputs, ref_buffer_.data(),
-                                  static_cast<int>(ref_buffer_.size()), dt_ctrl, &stats);
+                                  static_cast<int>(ref_buffer_.size()), dt_ctrl, &stats, may_solve);
+      if (!may_solve && !stats.solved) {  // (a controller without a plan yet solves regardless)
+        if (!deferred) next_first = i;
+        deferred = true;
+        solves_deferred_.fetch_add(1, std::memory_order_relaxed);
+      }
       solve_seconds += watch.elapsed();
       driven = true;
       if (stats.rejected) solver_rejections_.fetch_add(1, std::memory_order_relaxed);
@@ -301,6 +314,7 @@ const std::vector<double>& CylinderPool::update(double now) {
       ++exhausting;
     }
   }
+  first_ = next_first;
   exhausting_.store(exhausting, std::memory_order_relaxed);
   if (driven && pending_.solve_n < Pending::kCapacity) pending_.solve[pending_.solve_n++] = solve_seconds;
   mergeStatistics();
@@ -325,6 +339,7 @@ PoolCounters CylinderPool::counters() const {
   c.nonfinite_commands = nonfinite_commands_.load(std::memory_order_relaxed);
   c.solver_rejections = solver_rejections_.load(std::memory_order_relaxed);
   c.reference_timeouts = reference_timeouts_.load(std::memory_order_relaxed);
+  c.solves_deferred = solves_deferred_.load(std::memory_order_relaxed);
   return c;
 }
 

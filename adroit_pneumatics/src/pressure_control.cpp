@@ -300,7 +300,6 @@ IlqgPressureController::IlqgPressureController(const ParametricModel& model, con
 }
 
 void IlqgPressureController::reset() {
-  tick_ = 0;
   policy_.valid = false;  // the buffers stay (no allocation when the cylinder is driven again)
   have_last_ = false;
   disturbance_ = 0.0;
@@ -348,12 +347,17 @@ double IlqgPressureController::evaluate(double t, double p_meas, double w_last) 
 }
 
 double IlqgPressureController::update(double t, double p_meas, double w_last, const ParametricInputs& in,
-                                      const double* p_ref, int n_ref, double dt_ref, ControlStats* stats) {
+                                      const double* p_ref, int n_ref, double dt_ref, ControlStats* stats,
+                                      bool may_solve) {
   const IlqgParams& prm = solver_.params();
   const int n = prm.horizon;
   if (stats) *stats = ControlStats{};
   updateDisturbance(t, p_meas, w_last, in);
-  const bool due = (tick_++ % solve_every_) == 0 || !policy_.valid;
+  // Scheduled once solve_every periods have passed since the plan (half a period early, for
+  // the ticks' jitter), or when the clock went back; one that may not run now stays scheduled.
+  const double since_plan = t - policy_.t0;
+  const bool scheduled = since_plan < 0 || since_plan >= (solve_every_ - 0.5) * prm.dt;
+  const bool due = (scheduled && may_solve) || !policy_.valid;
   if (due && n_ref > 0 && std::isfinite(p_meas) && std::isfinite(w_last)) {
     const auto start = std::chrono::steady_clock::now();
     resampleReference(p_ref, n_ref, dt_ref, 0.0, prm.dt, n + 1, p_ref_.data());
@@ -453,7 +457,8 @@ void PidfController::reset() {
 }
 
 double PidfController::update(double t, double p_meas, double /*w_last*/, const ParametricInputs& in,
-                              const double* p_ref, int n_ref, double dt_ref, ControlStats* stats) {
+                              const double* p_ref, int n_ref, double dt_ref, ControlStats* stats,
+                              bool /*may_solve: nothing to solve*/) {
   if (stats) *stats = ControlStats{};
   if (n_ref < 1 || !std::isfinite(p_meas) || !std::isfinite(p_ref[0])) return kNaN;
   const double e = p_ref[0] - p_meas;  // Pa (the gains are per Pa)

@@ -153,6 +153,31 @@ TEST(Pool, ReferencesStampedFarFromTheClockAreRejected) {
   EXPECT_EQ(pool.exhausting(), 1u);  // A_FFJ2_flex is driven, A_FFJ2_ext has no plan
 }
 
+// A spent solve budget: each cylinder keeps commanding from the plan it has (finite, not the
+// exhaust), and every solve it skips is counted; without a budget nothing is deferred.
+TEST(Pool, ASpentSolveBudgetKeepsThePlansAndCountsTheDeferredSolves) {
+  for (const double budget : {0.0, 1e-12}) {
+    PoolOptions o;
+    o.ilqg.horizon = 40;
+    o.solve_budget = budget;
+    CylinderPool pool({m9("A_FFJ2_flex"), m9("A_FFJ2_ext")}, kModel, o);
+    ASSERT_TRUE(constantReference(pool, 0.0, 5.0, 5.0).ok());
+    feedState(pool, 0.0, kAtm);
+    pool.update(0.0);  // the first plans are solved whatever the budget
+    EXPECT_EQ(pool.counters().solves_deferred, 0u);
+    for (int k = 1; k <= 3; ++k) {
+      feedState(pool, 0.005 * k, kAtm + 1e3 * k);
+      const std::vector<double> u = pool.update(0.005 * k);
+      EXPECT_EQ(pool.exhausting(), 0u);
+      for (double x : u) EXPECT_TRUE(std::isfinite(x) && x > -5.0) << x;
+    }
+    EXPECT_EQ(pool.counters().solves_deferred, budget > 0 ? 6u : 0u) << "budget " << budget;
+  }
+  PoolOptions bad;
+  bad.solve_budget = -1e-3;
+  EXPECT_THROW(bad.validate(), std::invalid_argument);
+}
+
 TEST(Pool, StampToleranceIsValidated) {
   PoolOptions o;
   o.stamp_tolerance = 0.0;

@@ -108,7 +108,7 @@ double simulate(PressureController& c, double target, double seconds, double* fi
   std::vector<double> ref(101, target);
   double worst_late = 0;
   for (int k = 0; k < static_cast<int>(seconds / 0.005); ++k) {
-    const double u = c.update(k * 0.005, p, w, in, ref.data(), 101, 0.005, nullptr);
+    const double u = c.update(k * 0.005, p, w, in, ref.data(), 101, 0.005, nullptr, true);
     EXPECT_TRUE(std::isfinite(u));
     p = m.step(p, u, 0.005, in);
     w = u;
@@ -149,7 +149,7 @@ TEST(PidfController, FeedforwardTakesTheReferenceAheadByTheAdvance) {
   const auto command = [&](double advance) {
     prm.feedforward_advance = advance;
     PidfController c(m, prm);
-    return c.update(0.0, 200e3, 0.0, in, ref.data(), 4, 0.005, nullptr);
+    return c.update(0.0, 200e3, 0.0, in, ref.data(), 4, 0.005, nullptr, true);
   };
   const auto steady = [&](double p) { return m.inverseSteadyState(p, in, prm.u_min, prm.u_max); };
   EXPECT_NEAR(command(0.0), steady(200e3), 1e-9);
@@ -164,9 +164,35 @@ TEST(IlqgController, PolicyExpiresWithoutNewSolve) {
   IlqgPressureController c(model(), IlqgParams{}, 1000);
   ParametricInputs in;
   std::vector<double> ref(101, 300e3);
-  EXPECT_TRUE(std::isfinite(c.update(0.0, 200e3, 0.0, in, ref.data(), 101, 0.005, nullptr)));
+  EXPECT_TRUE(std::isfinite(c.update(0.0, 200e3, 0.0, in, ref.data(), 101, 0.005, nullptr, true)));
   EXPECT_TRUE(std::isfinite(c.evaluate(0.49, 200e3, 0.0)));
   EXPECT_TRUE(std::isnan(c.evaluate(0.51, 200e3, 0.0)));  // past the 0.5 s horizon
+}
+
+// A pool whose tick budget is spent (may_solve false) gets the plan it has, evaluated now;
+// the solve it missed stays due and runs at the next call that may solve, schedule or not.
+TEST(IlqgController, ASolveThatMayNotRunIsDeferredAndThePlanEvaluated) {
+  IlqgPressureController c(model(), IlqgParams{}, 3);
+  ParametricInputs in;
+  std::vector<double> ref(101, 300e3);
+  ControlStats stats;
+  // Without a plan it solves even when it may not (else it would have nothing to command).
+  EXPECT_TRUE(std::isfinite(c.update(0.0, 200e3, 0.0, in, ref.data(), 101, 0.005, &stats, false)));
+  EXPECT_TRUE(stats.solved);
+  c.update(0.005, 210e3, 0.5, in, ref.data(), 101, 0.005, &stats, true);  // tick 1 of 3: not scheduled
+  EXPECT_FALSE(stats.solved);
+  c.update(0.010, 220e3, 0.5, in, ref.data(), 101, 0.005, &stats, true);  // tick 2 of 3
+  EXPECT_FALSE(stats.solved);
+  // Tick 3: scheduled, but may not solve: the plan of t = 0 acts, as evaluate() gives it.
+  const double t0_plan = c.policy().t0;
+  const double held = c.update(0.015, 230e3, 0.5, in, ref.data(), 101, 0.005, &stats, false);
+  EXPECT_FALSE(stats.solved);
+  EXPECT_EQ(c.policy().t0, t0_plan);
+  EXPECT_DOUBLE_EQ(held, c.evaluate(0.015, c.pressureEstimate(), 0.5));
+  // The deferred solve is still due at the next call that may solve.
+  c.update(0.020, 240e3, held, in, ref.data(), 101, 0.005, &stats, true);
+  EXPECT_TRUE(stats.solved);
+  EXPECT_EQ(c.policy().t0, 0.020);
 }
 
 TEST(Resample, InterpolatesAndHolds) {
@@ -231,7 +257,7 @@ TEST(IlqgController, OffsetFreeAgainstAConstantDisturbance) {
     std::vector<double> ref(101, 350e3);
     double p = 200e3, w = 0.0;
     for (int k = 0; k < 300; ++k) {
-      const double u = c.update(k * 0.005, p, w, in, ref.data(), 101, 0.005, nullptr);
+      const double u = c.update(k * 0.005, p, w, in, ref.data(), 101, 0.005, nullptr, true);
       p = m.step(p, u, 0.005, in) - 2e6 * 0.005;
       w = u;
     }
@@ -266,7 +292,7 @@ TEST(IlqgController, ReferenceJumpStartsAtTheLimit) {
     for (int k = 0; k < 100; ++k) {
       const double target = k < 60 ? 200e3 : 450e3;
       std::vector<double> ref(101, target);
-      const double u = c.update(k * 0.005, p, w, in, ref.data(), 101, 0.005, nullptr);
+      const double u = c.update(k * 0.005, p, w, in, ref.data(), 101, 0.005, nullptr, true);
       if (k == 60) *first_after_jump = u;
       p = m.step(p, u, 0.005, in);
       w = u;
@@ -292,13 +318,13 @@ TEST(IlqgController, LargeInnovationIsTakenInFull) {
   std::vector<double> ref(101, 300e3);
   double p = 300e3, w = 0.0;
   for (int k = 0; k < 40; ++k) {  // settle on the model itself: innovations are zero
-    w = c.update(k * 0.005, p, w, in, ref.data(), 101, 0.005, nullptr);
+    w = c.update(k * 0.005, p, w, in, ref.data(), 101, 0.005, nullptr, true);
     p = m.stepDelayed(p, w, w, 0.005, in);
   }
   const double pred = m.stepDelayed(c.pressureEstimate(), w, w, 0.005, in);
-  c.update(40 * 0.005, pred + 2000.0, w, in, ref.data(), 101, 0.005, nullptr);  // noise-sized
+  c.update(40 * 0.005, pred + 2000.0, w, in, ref.data(), 101, 0.005, nullptr, true);  // noise-sized
   EXPECT_NEAR(c.pressureEstimate(), pred + 0.25 * 2000.0, 50.0);
   const double pred2 = m.stepDelayed(c.pressureEstimate(), w, w, 0.005, in);
-  c.update(41 * 0.005, pred2 + 60e3, w, in, ref.data(), 101, 0.005, nullptr);  // model error
+  c.update(41 * 0.005, pred2 + 60e3, w, in, ref.data(), 101, 0.005, nullptr, true);  // model error
   EXPECT_NEAR(c.pressureEstimate(), pred2 + 60e3 - 0.75 * 4000.0, 50.0);
 }

@@ -50,6 +50,12 @@ struct PoolOptions {
   std::string controller = "ilqg";  // ilqg | pidf
   IlqgParams ilqg;
   int solve_every = 1;              // iLQG: ticks between solves (policy evaluated every tick)
+  // s of wall time per tick for the controllers' solves; once spent, the tick's remaining
+  // cylinders evaluate the plans they have (each solve is deferred to the next tick, and the
+  // next tick starts with them). Bounds the CPU a pool takes when its solves grow (a burst of
+  // reference jumps) or the machine slows down, so the tick, and the commands the driver's
+  // watchdog waits for, stay on time. 0 = no budget.
+  double solve_budget = 0.0;
   PidfParams pidf;
   double reference_timeout = 0.25;  // s since the last valid reference; then exhaust
   double state_timeout = 0.05;      // s since the stamp of the last valid actuator state; then exhaust
@@ -114,6 +120,7 @@ struct PoolCounters {
   std::uint64_t nonfinite_commands = 0;  // controller output not finite -> exhaust
   std::uint64_t solver_rejections = 0;   // solver result dropped by the controller itself
   std::uint64_t reference_timeouts = 0;  // cylinder plans that expired
+  std::uint64_t solves_deferred = 0;     // controller calls past the tick's solve budget
 };
 
 // Statistics over a reporting window (since the last takeWindow()).
@@ -225,9 +232,11 @@ class CylinderPool {
   std::vector<std::uint64_t> expired_serial_;  // plan serial that timed out, per slot
   std::vector<char> active_;
   std::vector<double> commands_, ref_buffer_;
+  std::size_t first_ = 0;  // the slot the next tick starts with (the first one deferred)
   Pending pending_;
   std::atomic<std::size_t> exhausting_{0};
-  std::atomic<std::uint64_t> ticks_{0}, nonfinite_commands_{0}, solver_rejections_{0}, reference_timeouts_{0};
+  std::atomic<std::uint64_t> ticks_{0}, nonfinite_commands_{0}, solver_rejections_{0}, reference_timeouts_{0},
+      solves_deferred_{0};
 
   // Window statistics: the tick merges into them with try_lock (never waits), takeWindow locks.
   std::mutex window_mutex_;

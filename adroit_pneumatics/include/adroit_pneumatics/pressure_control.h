@@ -130,19 +130,23 @@ class PressureController {
   virtual ~PressureController() = default;
   // One control tick at time t: p_meas (Pa), w_last (V, command currently applied),
   // p_ref: n_ref pressure samples (Pa) at t + k * dt_ref. Returns a finite command in
-  // the controller's limits, or NaN if it has nothing safe to command.
+  // the controller's limits, or NaN if it has nothing safe to command. may_solve false: a
+  // controller that re-solves a plan (iLQG) evaluates the plan it has instead, unless it has
+  // none yet (a pool's compute budget for the tick is spent; CylinderPool).
   virtual double update(double t, double p_meas, double w_last, const ParametricInputs& in, const double* p_ref,
-                        int n_ref, double dt_ref, ControlStats* stats) = 0;
+                        int n_ref, double dt_ref, ControlStats* stats, bool may_solve) = 0;
   virtual void reset() = 0;
 };
 
-// iLQG MPC: re-solves every `solve_every` ticks (warm start by time shift) and evaluates
-// the resulting policy at every tick.
+// iLQG MPC: re-solves every `solve_every` control periods (params.dt; warm start by time
+// shift) and evaluates the resulting policy at every call. The solves go by time, not by
+// calls: a pool that ticks on every actuator state (the hardware, 500 Hz and more) evaluates
+// the policy on each sample and still solves once per period.
 class IlqgPressureController : public PressureController {
  public:
   IlqgPressureController(const ParametricModel& model, const IlqgParams& params, int solve_every = 1);
   double update(double t, double p_meas, double w_last, const ParametricInputs& in, const double* p_ref, int n_ref,
-                double dt_ref, ControlStats* stats) override;
+                double dt_ref, ControlStats* stats, bool may_solve) override;
   void reset() override;
   const Policy& policy() const { return policy_; }
   // Policy evaluated at time t and state; NaN if no valid policy covers t.
@@ -157,7 +161,6 @@ class IlqgPressureController : public PressureController {
   ParametricModel model_;
   IlqgSolver solver_;
   int solve_every_;
-  int tick_ = 0;
   Policy policy_;
   std::vector<double> p_ref_, u_des_, warm_;  // sized at construction
   // Offset-free estimator memory: last tick's time, measurement, commands and inputs.
@@ -187,7 +190,7 @@ class PidfController : public PressureController {
  public:
   PidfController(const ParametricModel& model, const PidfParams& params);
   double update(double t, double p_meas, double w_last, const ParametricInputs& in, const double* p_ref, int n_ref,
-                double dt_ref, ControlStats* stats) override;
+                double dt_ref, ControlStats* stats, bool may_solve) override;
   void reset() override;
 
  private:

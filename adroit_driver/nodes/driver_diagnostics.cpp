@@ -60,6 +60,7 @@ void RobotDriver::onDiagnostics(const ros::WallTimerEvent&) {
   Counters counters;
   double clock, physics_time;
   std::size_t never_commanded;
+  double command_age_max;
   std::string never_commanded_names;
   DiagnosticValues robot_values;
   {
@@ -69,6 +70,7 @@ void RobotDriver::onDiagnostics(const ros::WallTimerEvent&) {
     clock = robot_->clock();
     physics_time = robot_->data()->time;
     never_commanded = robot_->neverCommanded();
+    command_age_max = robot_->takeCommandAgeMax();
     for (std::size_t i = 0; i < commanded_snapshot_.size(); ++i) commanded_snapshot_[i] = robot_->everCommanded(i);
     robot_->addDiagnostics(&robot_values);  // the hardware's buses and boards (live state: under the lock)
   }
@@ -124,8 +126,10 @@ void RobotDriver::onDiagnostics(const ros::WallTimerEvent&) {
                                          : std::string("normal"));
   const int publisher_fifo = publisher_fifo_priority_;
   s.add("publisher_scheduling", publisher_fifo > 0 ? "SCHED_FIFO " + std::to_string(publisher_fifo) : std::string("normal"));
-  const int safety_fifo = safety_fifo_priority_;
+  const int safety_fifo = safety_queue_.priority();
   s.add("safety_scheduling", safety_fifo > 0 ? "SCHED_FIFO " + std::to_string(safety_fifo) : std::string("normal"));
+  s.add("transport_scheduling",
+        transport_fifo_priority_ > 0 ? "SCHED_FIFO " + std::to_string(transport_fifo_priority_.load()) : std::string("normal"));
   s.add("schedule_resyncs", total_resyncs_);
   s.add("safe_state", safety.safe_state);
   s.add("estop_latched", safety.estop_latched);
@@ -135,6 +139,7 @@ void RobotDriver::onDiagnostics(const ros::WallTimerEvent&) {
   s.add("watchdog_latched", safety.watchdog_latched);
   s.add("watchdog_timeout", robot_->watchdogTimeout());
   s.add("never_commanded", never_commanded);
+  s.add("command_age_max_ms", command_age_max * 1e3);  // the watchdog's margin over the window
   s.add("never_commanded_names", never_commanded_names);
   s.add("fault_latched", safety.fault_latched);
   s.add("fault_persists", safety.fault_persists);

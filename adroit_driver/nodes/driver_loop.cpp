@@ -21,16 +21,17 @@ namespace {
 using SteadyClock = std::chrono::steady_clock;
 }  // namespace
 
-bool RobotDriver::enterRealtimeScheduling() {
+bool RobotDriver::enterRealtimeScheduling(int priority, const char* parameter) {
   std::string error;
-  if (!enterFifo(params_.realtime_priority, &error)) {
-    ROS_WARN("%s: ~realtime_priority %d: SCHED_FIFO not permitted (%s); stepping with normal scheduling "
-             "(grant an rtprio limit or CAP_SYS_NICE, or set ~realtime_priority: 0)", name_,
-             params_.realtime_priority, error.c_str());
+  if (!enterFifo(priority, &error)) {
+    ROS_WARN("%s: ~%s %d: SCHED_FIFO not permitted (%s); stepping with normal scheduling "
+             "(grant an rtprio limit or CAP_SYS_NICE, or set ~%s: 0)", name_, parameter, priority, error.c_str(),
+             parameter);
     return false;
   }
-  fifo_priority_ = params_.realtime_priority;
-  ROS_INFO("%s: simulation thread under SCHED_FIFO, priority %d", name_, params_.realtime_priority);
+  fifo_priority_ = priority;
+  ROS_INFO("%s: %s thread under SCHED_FIFO, priority %d", name_, robot_->drivenByInput() ? "robot" : "simulation",
+           priority);
   return true;
 }
 
@@ -107,7 +108,8 @@ void RobotDriver::loop() {
   // scheduling.
   constexpr int kMaxMissedInRow = 250;
   sim_thread_id_ = syscall(SYS_gettid);
-  bool fifo = params_.realtime && params_.realtime_priority > 0 && enterRealtimeScheduling();
+  bool fifo = params_.realtime && params_.physics_priority > 0 &&
+              enterRealtimeScheduling(params_.physics_priority, "physics_priority");
   if (!params_.realtime) raiseLockstepWeight();
   int missed_in_row = 0;
   while (running_) {
@@ -205,7 +207,8 @@ void RobotDriver::loop() {
 void RobotDriver::inputLoop() {
   const auto dt = std::chrono::duration_cast<SteadyClock::duration>(std::chrono::duration<double>(robot_->timestep()));
   sim_thread_id_ = syscall(SYS_gettid);
-  if (params_.realtime_priority > 0) enterRealtimeScheduling();  // it sleeps in ppoll: FIFO is safe
+  // It sleeps in ppoll: FIFO is safe. The robot's I/O is the safety path: the top priority.
+  if (params_.realtime_priority > 0) enterRealtimeScheduling(params_.realtime_priority, "realtime_priority");
   auto next_tick = SteadyClock::now() + dt;
   while (running_) {
     const auto now = SteadyClock::now();

@@ -64,9 +64,9 @@ RobotDriver::RobotDriver(ros::NodeHandle nh, DriverParams params, std::unique_pt
   if (params_.use_sim_time) clock_pub_ = nh_.advertise<rosgraph_msgs::Clock>("/clock", 10);
   tf_ = std::make_unique<tf2_ros::TransformBroadcaster>();
 
-  // The safety path: its own queue and spinner thread, never behind a long /step or /reset.
+  // The safety path: its own queue and thread (started in start()).
   safety_io_ = ros::NodeHandle(nh_, "adroit");
-  safety_io_.setCallbackQueue(&safety_queue_);
+  safety_io_.setCallbackQueue(safety_queue_.queue());
   const auto hints = ros::TransportHints().tcpNoDelay();
   valve_sub_ = safety_io_.subscribe("valve_command", 10, &RobotDriver::onValveCommand, this, hints);
   force_sub_ = safety_io_.subscribe("tendon_force_command", 10, &RobotDriver::onForceCommand, this, hints);
@@ -94,6 +94,7 @@ RobotDriver::~RobotDriver() { stop(); }
 
 int runDriverNode(int argc, char** argv, const char* name, DriverFactory make) {
   ros::init(argc, argv, name);
+  rosutil::startRos();  // roscpp's threads known, for start() to put them under SCHED_FIFO
   std::unique_ptr<RobotDriver> driver;
   try {
     driver = make(ros::NodeHandle(), ros::NodeHandle("~"));
@@ -117,17 +118,18 @@ void RobotDriver::start() {
   }
   publisher_ = std::thread(&RobotDriver::publishLoop, this);
   thread_ = std::thread(robot_->drivenByInput() ? &RobotDriver::inputLoop : &RobotDriver::loop, this);
-  safety_running_ = true;
-  safety_thread_ = std::thread(&RobotDriver::safetyLoop, this);
-}
-
-// The safety queue's one thread: e-stop, release, pause and every command. Real time: under
-// SCHED_FIFO just below the publisher, so a busy machine cannot hold commands back until the
-// watchdog trips (it sleeps while the queue is empty).
-void RobotDriver::safetyLoop() {
-  if (params_.realtime && params_.realtime_priority > 2 && enterFifo(params_.realtime_priority - 2, nullptr))
-    safety_fifo_priority_ = params_.realtime_priority - 2;
-  while (safety_running_.load()) safety_queue_.callAvailable(ros::WallDuration(0.02));
+  // Real time: the commands' whole path under SCHED_FIFO (adroit_ros/realtime.h), roscpp's
+  // socket thread that receives them just below the safety queue that applies them, so a busy
+  // machine cannot hold commands back until the watchdog trips.
+  safety_queue_.start(params_.realtime && params_.realtime_priority > 2 ? params_.realtime_priority - 2 : 0);
+  if (params_.realtime && params_.realtime_priority > 3) {
+    std::string error;
+    if (rosutil::fifoRosThreads(params_.realtime_priority - 3, &error))
+      transport_fifo_priority_ = params_.realtime_priority - 3;
+    else
+      ROS_WARN("%s: roscpp's threads keep normal scheduling (%s): on a busy machine commands may reach the "
+               "safety queue late", name_, error.c_str());
+  }
 }
 
 void RobotDriver::stop() {
@@ -141,8 +143,7 @@ void RobotDriver::stop() {
   }
   work_cv_.notify_all();
   if (publisher_.joinable()) publisher_.join();
-  safety_running_ = false;
-  if (safety_thread_.joinable()) safety_thread_.join();
+  safety_queue_.stop();
 }
 
 ros::Time RobotDriver::stamp() const {

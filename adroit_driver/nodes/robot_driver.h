@@ -53,6 +53,7 @@
 #include "adroit_core/mujoco_model.h"
 #include "adroit_core/pi_mutex.h"
 #include "adroit_core/timing_stats.h"
+#include "adroit_ros/realtime.h"
 #include "adroit_driver/robot.h"
 #include "adroit_ros/params.h"
 
@@ -74,13 +75,25 @@ struct DriverParams {
   double joint_state_rate = 500, actuator_state_rate = 250, touch_rate = 250, object_rate = 250;
   double marker_rate = 20;          // wall Hz, only while someone listens
   double diagnostics_period = 1.0;  // wall s
-  double max_lag = 0.1;             // s behind schedule before real time re-synchronises
+  // s behind schedule before real time re-synchronises rather than running steps back to
+  // back to catch up (a stalled machine pauses the simulated world instead of fast-forwarding
+  // it past commands that could not arrive meanwhile).
+  double max_lag = 0.02;
   // Diagnostics warn about cylinders never commanded once this long (wall s) has passed
   // since start or release: a pool that never started leaves its cylinders unwatched.
   double never_commanded_grace = 10.0;
-  // Real time only: SCHED_FIFO priority of the simulation thread, 0 = normal scheduling.
-  // Falls back to normal scheduling, with a warning, when the system does not permit it.
+  // Real time only: SCHED_FIFO priority of the wrapper's I/O (publisher realtime_priority - 1,
+  // safety queue - 2, roscpp's threads - 3) and of the hardware's robot thread; 0 = normal
+  // scheduling. Falls back to normal scheduling, with a warning, when not permitted.
   int realtime_priority = 20;
+  // Real time, simulation only: SCHED_FIFO priority of the physics (the simulation thread),
+  // below every controller's command path (pools 14-16, teleop 12-13, MPC 10-12; adroit_ros
+  // realtime.h): the simulated world is the plant, not the safety path. On a machine that
+  // cannot run everything on time the physics yields, the real-time factor drops (reported),
+  // and the commands the watchdog waits for keep flowing. At the top priority it took a core
+  // to catch up after every slow-down of the machine while the pools waited, and the
+  // watchdog tripped on commands that could not be sent. 0 = normal scheduling.
+  int physics_priority = 9;
   // Lockstep only: nice value of the simulation thread, in [-20, 0], 0 = unchanged. The
   // thread never sleeps there, so SCHED_FIFO would be throttled (50 ms stalls every second);
   // a high normal-scheduling weight instead keeps consumer processes from preempting it.
@@ -154,7 +167,7 @@ class RobotDriver {
   // Robot thread.
   void loop();
   void inputLoop();  // a robot driven by its input (hardware)
-  bool enterRealtimeScheduling();
+  bool enterRealtimeScheduling(int priority, const char* parameter);
   void leaveRealtimeScheduling(const char* why);
   void raiseLockstepWeight();
   void recordStepTiming(double step_seconds, double lateness);
@@ -182,7 +195,6 @@ class RobotDriver {
   // Safety queue (sim_services.cpp).
   void onValveCommand(const adroit_msgs::ValveCommand::ConstPtr& msg);
   void onForceCommand(const adroit_msgs::TendonForceCommand::ConstPtr& msg);
-  void safetyLoop();  // the safety queue's thread
   void onEstopInput(const std_msgs::Bool::ConstPtr& msg);
   void onBaseTarget(const geometry_msgs::PoseStamped::ConstPtr& msg);  // teleop scenes, default queue
   bool onPause(std_srvs::SetBool::Request& req, std_srvs::SetBool::Response& res);
@@ -213,10 +225,10 @@ class RobotDriver {
   int joint_every_ = 1, actuator_every_ = 1, touch_every_ = 1, object_every_ = 1;
 
   ros::NodeHandle nh_, io_;
-  ros::CallbackQueue safety_queue_;
+  // The safety path: e-stop, release, pause and every command, on a thread of its own under
+  // SCHED_FIFO just below the publisher (real time), never behind a long /step or /reset.
+  rosutil::FifoCallbackQueue safety_queue_;
   ros::NodeHandle safety_io_;  // /adroit on safety_queue_
-  std::thread safety_thread_;  // runs safety_queue_ (safetyLoop)
-  std::atomic<bool> safety_running_{false};
   ros::Publisher joint_pub_, actuator_pub_, touch_pub_, odom_pub_, diag_pub_, safe_pub_, marker_pub_, clock_pub_;
   ros::Subscriber valve_sub_, force_sub_, estop_input_sub_, base_sub_;
   ros::Publisher latency_pub_;
@@ -277,7 +289,7 @@ class RobotDriver {
   std::atomic<int> fifo_priority_{0};  // of the simulation thread now (0 = normal scheduling)
   std::atomic<int> thread_nice_{0};    // of the simulation thread now (lockstep)
   std::atomic<int> publisher_fifo_priority_{0};  // of the publisher thread (real time), 0 = normal
-  std::atomic<int> safety_fifo_priority_{0};     // of the safety thread (real time), 0 = normal
+  std::atomic<int> transport_fifo_priority_{0};  // of roscpp's threads (real time), 0 = normal
   std::atomic<long> sim_thread_id_{0};
   std::thread thread_;
 

@@ -65,6 +65,7 @@ DriverParams readDriverParams(const rosutil::Params& p, bool simulated) {
   if (simulated) {
     out.realtime = p.boolean("realtime", out.realtime);
     out.start_paused = p.boolean("start_paused", out.start_paused);
+    out.physics_priority = p.integer("physics_priority", out.physics_priority, 0, 99);
     ros::param::param<bool>("/use_sim_time", out.use_sim_time, false);
     if (!out.realtime && !out.use_sim_time)
       p.fail("realtime", "false (lockstep) needs /use_sim_time: true so that every node follows /clock");

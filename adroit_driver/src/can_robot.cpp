@@ -792,8 +792,12 @@ void CanRobot::checkSafety(double t) {
       const double c = last_command_clock_[i];
       if (c != kNeverCommanded && (stalest < 0 || c < last_command_clock_[stalest])) stalest = static_cast<int>(i);
     }
-    if (stalest >= 0 && t - last_command_clock_[stalest] >= config_.watchdog_timeout - kTimeEps)
-      enterSafeState(SafeCause::kWatchdog, can::EstopCause::kWatchdog, -1, stalest);
+    if (stalest >= 0) {
+      const double age = t - last_command_clock_[stalest];
+      command_age_max_ = std::max(command_age_max_, age);
+      if (age >= config_.watchdog_timeout - kTimeEps)
+        enterSafeState(SafeCause::kWatchdog, can::EstopCause::kWatchdog, -1, stalest);
+    }
   }
   bool persists = false;
   for (const Bus& bus : buses_) persists |= bus.down != BusDown::kUp;

@@ -400,8 +400,11 @@ void SimulatedRobot::step() {
       const double t = last_command_clock_[i];
       if (t != kNeverCommanded && (stalest < 0 || t < last_command_clock_[stalest])) stalest = static_cast<int>(i);
     }
-    if (stalest >= 0 && clock_ - last_command_clock_[stalest] >= config_.watchdog_timeout - 1e-9)
-      enterSafeState(SafeCause::kWatchdog, stalest);
+    if (stalest >= 0) {
+      const double age = clock_ - last_command_clock_[stalest];
+      command_age_max_ = std::max(command_age_max_, age);
+      if (age >= config_.watchdog_timeout - 1e-9) enterSafeState(SafeCause::kWatchdog, stalest);
+    }
   }
   if (base_target_set_) moveBaseTarget();
   FaultSite fault;

@@ -705,6 +705,7 @@ TEST_F(CanRobotTest, TheWatchdogLatchesWithinAStepAndStopsTheValves) {
   const double late = robot_->safetyEvents().watchdog.clock - commanded;
   EXPECT_GE(late, 0.05 - 1e-9);
   EXPECT_LE(late, 0.051 + 1e-9);
+  EXPECT_NEAR(robot_->takeCommandAgeMax(), late, 1e-9);  // the margin reached: all of it
   EXPECT_EQ(robot_->safetyEvents().watchdog.cylinder, 0);
   EXPECT_EQ(robot_->counters().watchdog_trips, 1u);
   EXPECT_EQ(

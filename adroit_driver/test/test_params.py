@@ -45,6 +45,7 @@ class Params(unittest.TestCase):
         self.check("bad_lockstep", ["_realtime:=false"], "bad parameter /bad_lockstep/realtime:", "/use_sim_time")
         self.check("bad_type", ["_timestep:=fast"], "bad parameter /bad_type/timestep: expected a number")
         self.check("bad_priority", ["_realtime_priority:=120"], "bad parameter /bad_priority/realtime_priority:", "[0, 99]")
+        self.check("bad_physics", ["_physics_priority:=-1"], "bad parameter /bad_physics/physics_priority:", "[0, 99]")
         self.check("bad_nice", ["_lockstep_nice:=5"], "bad parameter /bad_nice/lockstep_nice:", "[-20, 0]")
 
 

@@ -75,8 +75,11 @@ class RealTime(unittest.TestCase):
         self.assertAlmostEqual(float(values["real_time_factor"]), 1.0, delta=0.05, msg=str(values))
         self.assertEqual(values["time_mode"], "realtime")
         if os.geteuid() == 0:
-            self.assertEqual(values["thread_scheduling"], "SCHED_FIFO 20", str(values))
+            # The physics below the controllers' command paths, the I/O above them (sim.yaml).
+            self.assertEqual(values["thread_scheduling"], "SCHED_FIFO 9", str(values))
             self.assertEqual(values["publisher_scheduling"], "SCHED_FIFO 19", str(values))
+            self.assertEqual(values["safety_scheduling"], "SCHED_FIFO 18", str(values))
+            self.assertEqual(values["transport_scheduling"], "SCHED_FIFO 17", str(values))
 
 
 if __name__ == "__main__":

@@ -255,6 +255,24 @@ TEST(SimulatedRobot, WatchdogEntersSafeStateWithinOneControlPeriodOfTheTimeout) 
   }
 }
 
+// The watchdog's margin: the age the stalest command reached, over the steps since it was
+// last taken; nothing before the first command or while safe.
+TEST(SimulatedRobot, CommandAgeMaxIsTheWatchdogsMarginSinceItWasTaken) {
+  SimulatedRobot robot(config("hand"));
+  for (int k = 0; k < 10; ++k) robot.step();
+  EXPECT_EQ(robot.takeCommandAgeMax(), 0.0);  // not armed
+  const double dt = robot.timestep();
+  commandAll(robot, 1.0);
+  for (int k = 0; k < 10; ++k) robot.step();  // observed at the start of each step: 0, dt, ..., 9 dt
+  EXPECT_NEAR(robot.takeCommandAgeMax(), 9 * dt, 1e-9);
+  commandAll(robot, 1.0);
+  for (int k = 0; k < 3; ++k) robot.step();
+  EXPECT_NEAR(robot.takeCommandAgeMax(), 2 * dt, 1e-9);  // taken: counted afresh
+  robot.estop();
+  for (int k = 0; k < 30; ++k) robot.step();
+  EXPECT_EQ(robot.takeCommandAgeMax(), 0.0);  // safe: the watchdog does not watch
+}
+
 TEST(SimulatedRobot, WatchdogWatchesEveryCommandedCylinder) {
   SimulatedRobot robot(config("hand"));
   robot.commandValves({"A_FFJ3_flex"}, {}, {1.0});

@@ -22,6 +22,7 @@
 #include <mutex>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "adroit_core/model_tables.h"
@@ -118,6 +119,7 @@ class CanRobot final : public Robot {
   // channels 0..3), node number (kHeartbeat, kBoard); cylinder = the cylinder concerned, if any.
   std::string describe(const SafetyEvent& event) const override;
   std::size_t neverCommanded() const override { return never_commanded_; }
+  double takeCommandAgeMax() override { return std::exchange(command_age_max_, 0.0); }
   bool everCommanded(std::size_t cylinder) const override { return last_command_clock_[cylinder] != kNeverCommanded; }
 
   bool simulated() const override { return false; }
@@ -318,6 +320,7 @@ class CanRobot final : public Robot {
 
   std::vector<double> command_, applied_command_, last_command_clock_;
   std::size_t never_commanded_ = 0;
+  double command_age_max_ = 0;  // takeCommandAgeMax
   Signals sensed_;
   SafetyStatus safety_;
   Counters counters_;

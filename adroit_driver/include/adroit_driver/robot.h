@@ -156,6 +156,10 @@ class Robot {
   // Cylinders without an accepted command since start or the last release (unwatched).
   virtual std::size_t neverCommanded() const = 0;
   virtual bool everCommanded(std::size_t cylinder) const = 0;
+  // The watchdog's margin: the largest age (s of the robot's clock) its stalest commanded
+  // cylinder's command reached at a step since the last call, while armed and not safe (0 if
+  // never). The watchdog trips at watchdogTimeout().
+  virtual double takeCommandAgeMax() = 0;
   // Hardware: recover a bus that went bus-off or hung up (never automatic). The simulation
   // has no buses.
   virtual bool recover(std::string* why) {

@@ -12,6 +12,7 @@
 #include <limits>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "adroit_core/model_tables.h"
@@ -81,6 +82,7 @@ class SimulatedRobot final : public Robot {
   // Cylinders without an accepted command since start or the last release: the watchdog
   // does not watch them (a pool that never started leaves them at idle). O(1).
   std::size_t neverCommanded() const override { return never_commanded_; }
+  double takeCommandAgeMax() override { return std::exchange(command_age_max_, 0.0); }
   bool everCommanded(std::size_t cylinder) const override { return last_command_clock_[cylinder] != kNeverCommanded; }
 
   // --- state ---
@@ -192,6 +194,7 @@ class SimulatedRobot final : public Robot {
   std::vector<double> applied_command_;  // what acted in the last step (safe state applied)
   std::vector<double> last_command_clock_;  // kNeverCommanded until a command is accepted
   std::size_t never_commanded_ = 0;
+  double command_age_max_ = 0;  // takeCommandAgeMax
   std::vector<double> travel_, travel_rate_;
   Signals truth_;
   SensorPipeline sensors_;

@@ -15,7 +15,7 @@
 // --sensed: the planner and the policy see the driver's sensed signals (sensor realism: noise,
 // quantisation, delays) instead of the true state, as the node does.
 // --feedback-scale F: the fraction of the policy's feedback gains applied, in [0, 1] (the
-// node's ~feedback_scale; 1 by default).
+// node's ~feedback_scale; default: the task's feedback_scale hint, else 1).
 // --latency-sweep: iLQG on every task again with each fixed planning latency (simulated
 // s per optimisation instead of the measured wall time): how fast the planner must be.
 // Variant as_planned (diagnostic): iLQG in force mode against a simulation that runs the
@@ -27,7 +27,7 @@
 // --set key=number: a task parameter (weight, threshold) over config/tasks/<task>.yaml, for
 // tuning without a rebuild (the --latency-sweep runs use it too).
 // --pool ilqg_key=number: a setting of the pools' iLQG (names of IlqgParams, setIlqgParam),
-// over config/pools.yaml's (iterations 2, the rest IlqgParams' defaults).
+// over config/pools.yaml's (iterations 1, the rest IlqgParams' defaults).
 //
 // Closed loop in emulated real time, ROS-free, against the simulation driver's core
 // (adroit_driver::SimulatedRobot: the physical scene in 2 ms steps, the pneumatic plant,
@@ -221,6 +221,8 @@ class TrialRunner {
       settings_.derivative_skip = defaults.numbers.count("derivative_skip")
                                       ? static_cast<int>(paramNumber(task, defaults, "derivative_skip", 1, 100))
                                       : PlannerSettings{}.derivative_skip;
+    feedback_scale_ = defaults.numbers.count("feedback_scale") ? paramNumber(task, defaults, "feedback_scale", 0, 1)
+                                                                : 1.0;
     settings_.synergies = variant.synergies;
     PlanningModelSettings ms;
     ms.timestep = settings_.dt;
@@ -562,7 +564,7 @@ class TrialRunner {
   }
 
   bool sensed_ = false;
-  double feedback_scale_ = 1.0;  // the node's ~feedback_scale
+  double feedback_scale_ = 1.0;  // the node's ~feedback_scale (the task's hint unless set)
   std::vector<double> qpos_, qvel_;
   static constexpr double kPoolPeriod = 0.005;  // s, the pools' 200 Hz (config/pools.yaml)
   static constexpr int kMaxReferenceSamples = 256;
@@ -654,12 +656,12 @@ int main(int argc, char** argv) {
   unsigned seed = 1;
   double fixed_latency = -1;
   bool sensed = false;
-  double feedback_scale = 1.0;
+  double feedback_scale = -1;  // the task's hint
   double contact_margin = -1, contact_softness = -1;  // --contact M,S
   bool print_events = false;
   std::map<std::string, double> params;  // --set key=value
   pneumatics::IlqgParams pool_ilqg;      // --pool key=value; the pools' settings as config/pools.yaml has them
-  pool_ilqg.iterations = 2;
+  pool_ilqg.iterations = 1;
   std::vector<std::string> sweep;  // fixed latencies [s] for iLQG on every task
   PlannerSettings overrides;       // horizon, dt <= 0: the task's hints
   overrides.horizon = overrides.dt = -1;
@@ -711,7 +713,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "mpc_success: --trials must be at least 1\n");
     return 2;
   }
-  if (!(feedback_scale >= 0 && feedback_scale <= 1)) {
+  if (feedback_scale != -1 && !(feedback_scale >= 0 && feedback_scale <= 1)) {
     std::fprintf(stderr, "mpc_success: --feedback-scale must be in [0, 1]\n");
     return 2;
   }
@@ -777,7 +779,7 @@ int main(int argc, char** argv) {
       TrialRunner runner(task, variant, overrides, contact_margin, contact_softness);
       runner.setFixedLatency(fixed_latency);
       runner.setSensed(sensed);
-      runner.setFeedbackScale(feedback_scale);
+      if (feedback_scale >= 0) runner.setFeedbackScale(feedback_scale);
       runner.setPrintEvents(print_events);
       runner.setParams(params);
       runner.setPoolParams(pool_ilqg);

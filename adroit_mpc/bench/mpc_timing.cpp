@@ -3,7 +3,8 @@
 //
 //   mpc_timing [--iterations N] [--quick]
 //
-// 1. Cost of one step and of one finite-difference knot on the planning model, sensors on/off.
+// 1. Cost of one step and of one finite-difference knot on the planning model, sensors on/off;
+//    grouped finite differences (separated trees nudged together) against mjd_transitionFD.
 // 2. iLQG (and predictive sampling in the same run) in closed loop on the bottle drop:
 //    the simulation (bottle.xml, 2 ms) runs the policy for one control period between two
 //    optimisations; per-phase time split, median and p90.
@@ -16,6 +17,7 @@
 #include <adroit_core/model_tables.h>
 #include <adroit_core/timing_stats.h>
 #include <adroit_description/scenes.h>
+#include <adroit_mpc/fd_derivatives.h>
 #include <adroit_mpc/ilqg_planner.h>
 #include <adroit_mpc/planning_model.h>
 #include <adroit_mpc/sampling_planner.h>
@@ -259,6 +261,54 @@ int main(int argc, char** argv) {
     double fixed_step_us, fixed_fd_ms;
     stepAndFdTime(fixed.get(), fixed_step_us, fixed_fd_ms);
     std::printf("%-44s %10.1f %12.2f\n", "dt 0.005 s, sensors off, FIXED tendons (what-if)", fixed_step_us, fixed_fd_ms);
+
+    // 1b. Grouped finite differences (fd_derivatives.h) against MuJoCo's one column per DOF,
+    // paired in alternating blocks on the same knots: the keypad at rest with the typing
+    // task's contact settings (twelve keys, one tree each), the bottle falling free.
+    std::printf("\nFinite differences per knot, one core: mjd_transitionFD against trees nudged together\n");
+    std::printf("%-34s %8s %8s %12s %12s %7s %10s\n", "knot", "nv", "columns", "mjd [ms]", "grouped [ms]", "ratio",
+                "max |dA|");
+    for (const char* which : {"keypad", "bottle"}) {
+      const bool keypad = std::string(which) == "keypad";
+      PlanningModelSettings s;
+      s.timestep = 0.01;
+      if (keypad) s.contact_margin = s.contact_softness = 0.001;  // config/tasks/type.yaml's node settings
+      auto m = loadPlanningModel(adroit::description::sceneFile(scene.share, which, true), s);
+      adroit::DataPtr d = adroit::makeData(m.get());
+      const int rest = mj_name2id(m.get(), mjOBJ_KEY, "rest");
+      if (rest >= 0) mj_resetDataKeyframe(m.get(), d.get(), rest);
+      const int object = mj_name2id(m.get(), mjOBJ_BODY, "object");
+      if (!keypad && object >= 0) d->qpos[m->jnt_qposadr[m->body_jntadr[object]] + 2] += 0.15;  // above the palm
+      for (int a = 0; a < m->nu; ++a) d->ctrl[a] = m->actuator_ctrlrange[2 * a];
+      mj_forward(m.get(), d.get());
+      const int nx = 2 * m->nv + m->na;
+      Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> A_ref(nx, nx), B_ref(nx, m->nu);
+      Eigen::MatrixXd A(nx, nx), B(nx, m->nu);
+      FdDerivatives fd;
+      fd.initialize(m.get(), 1, 1, FdSettings{1e-6, false, 1, true});
+      adroit::DataPtr work = adroit::makeData(m.get());
+      std::vector<double> mjd_ms, grouped_ms;
+      int columns = 0;
+      for (int block = 0; block < 10; ++block) {
+        adroit::Stopwatch clock;
+        for (int k = 0; k < 5; ++k) {
+          mj_copyData(work.get(), m.get(), d.get());
+          mjd_transitionFD(m.get(), work.get(), 1e-6, 0, A_ref.data(), B_ref.data(), nullptr, nullptr);
+        }
+        mjd_ms.push_back(1e3 * clock.elapsed() / 5);
+        clock.restart();
+        for (int k = 0; k < 5; ++k) {
+          mj_copyData(work.get(), m.get(), d.get());
+          columns = fd.knot(work.get(), 0, A, B);
+        }
+        grouped_ms.push_back(1e3 * clock.elapsed() / 5);
+      }
+      const double a = adroit::percentile(mjd_ms, 50), b = adroit::percentile(grouped_ms, 50);
+      char label[64];
+      std::snprintf(label, sizeof label, "%s (%d contacts)", keypad ? "keypad at rest" : "bottle falling", d->ncon);
+      std::printf("%-34s %8d %8d %12.2f %12.2f %7.2f %10.1e\n", label, m->nv, columns, a, b, b / a,
+                  (A - Eigen::MatrixXd(A_ref)).cwiseAbs().maxCoeff());
+    }
 
     // 2. Closed loop, chosen defaults (config/mpc.yaml).
     PlannerSettings chosen;

@@ -2,10 +2,12 @@
 // tendon-force command (force mode) or the pools' force references (pneumatic mode).
 #include <ros/ros.h>
 
+#include "adroit_ros/realtime.h"
 #include "mpc_ros.h"
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "adroit_mpc");
+  adroit::rosutil::startRos();  // roscpp's threads known: start() puts them under SCHED_FIFO
   ros::NodeHandle nh, pnh("~");
   std::unique_ptr<adroit::mpc_node::MpcNode> node;
   try {

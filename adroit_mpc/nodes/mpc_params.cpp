@@ -105,7 +105,7 @@ MpcParams readParams(const ros::NodeHandle& pnh) {
   s.derivative_skip = p.integer("derivative_skip", static_cast<int>(hint("derivative_skip", s.derivative_skip)), 1, 100);
   s.samples = p.integer("samples", s.samples, 1, 4096);
   s.noise_scale = p.number("noise_scale", s.noise_scale, 0.0, 10.0);
-  out.feedback_scale = p.number("feedback_scale", out.feedback_scale, 0.0, 1.0);
+  out.feedback_scale = p.number("feedback_scale", hint("feedback_scale", out.feedback_scale), 0.0, 1.0);
   s.feedback_scale = out.feedback_scale;
 
   out.control_rate = p.number("control_rate", out.control_rate, 1.0, 2000.0);

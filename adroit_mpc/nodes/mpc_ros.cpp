@@ -102,9 +102,9 @@ MpcNode::MpcNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   goal_sub_ = mpc.subscribe("goal", 5, &MpcNode::onGoal, this);
   type_sub_ = mpc.subscribe("type", 5, &MpcNode::onType, this);
 
-  // States on their own queue: marker building or a service never delays them.
+  // States on their own queue (started in start()).
   ros::NodeHandle state_nh(nh_);
-  state_nh.setCallbackQueue(&state_queue_);
+  state_nh.setCallbackQueue(state_queue_.queue());
   joint_sub_ = state_nh.subscribe("/adroit/joint_states", 10, &MpcNode::onJointState, this,
                                   ros::TransportHints().tcpNoDelay());
   if (object_qpos_ >= 0)
@@ -135,15 +135,17 @@ MpcNode::MpcNode(ros::NodeHandle nh, ros::NodeHandle pnh)
 MpcNode::~MpcNode() { stop(); }
 
 void MpcNode::start() {
-  if (params_.nice > 0) {
-    // Before the node's own threads start (they inherit it); the thread pool and roscpp's
-    // threads, already running, are set one by one.
-    const adroit::BackgroundResult r = adroit::runInBackground(params_.nice);
-    if (!r.error.empty()) ROS_WARN("adroit_mpc: ~nice %d: %s", params_.nice, r.error.c_str());
-  }
   running_ = true;
-  state_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &state_queue_);
-  state_spinner_->start();
+  // The states' whole path under SCHED_FIFO above the control loop (adroit_ros/realtime.h): in
+  // force mode a state that arrives late stops the commands and trips the driver's watchdog.
+  const int input_priority = params_.control_priority > 0 ? params_.control_priority + 2 : 0;
+  state_queue_.start(input_priority);
+  if (input_priority > 0) {
+    std::string error;
+    if (!rosutil::fifoRosThreads(input_priority, &error))
+      ROS_WARN("adroit_mpc: roscpp's threads keep normal scheduling (%s): on a busy machine states may arrive late",
+               error.c_str());
+  }
   default_spinner_ = std::make_unique<ros::AsyncSpinner>(1);
   default_spinner_->start();
   if (params_.lockstep) {
@@ -165,7 +167,7 @@ void MpcNode::stop() {
   if (planner_thread_.joinable()) planner_thread_.join();
   if (control_thread_.joinable()) control_thread_.join();
   if (default_spinner_) default_spinner_->stop();
-  if (state_spinner_) state_spinner_->stop();
+  state_queue_.stop();
 }
 
 // --- planner thread ------------------------------------------------------------------------
@@ -227,7 +229,22 @@ bool MpcNode::planOnce(const StateSnapshot& state) {
   return true;
 }
 
+void MpcNode::enterOptimiserThread() {
+  // Only the optimiser runs at ~nice: roscpp's threads and the state queue keep their weight,
+  // so a busy optimiser never delays the joint states whose silence stops the MPC (at nice 19
+  // for the whole node they arrived 0.1 s late whenever the machine was busy, and the driver's
+  // watchdog took the robot to its safe state). The planner is re-initialised here so that its
+  // worker threads are started by this thread and inherit the value.
+  if (params_.nice > 0) {
+    std::string error;
+    if (!adroit::setThreadNice(params_.nice, &error)) ROS_WARN("adroit_mpc: ~nice %d: %s", params_.nice, error.c_str());
+  }
+  std::lock_guard<std::mutex> lock(task_mutex_);
+  planner_->initialize(model_.get(), *live_task_, params_.settings);
+}
+
 void MpcNode::plannerLoop() {
+  enterOptimiserThread();
   while (running_ && ros::ok()) {
     if (stateAgeWall() > params_.state_timeout || !latestState(plan_state_)) {
       std::this_thread::sleep_for(std::chrono::milliseconds(1));
@@ -376,6 +393,7 @@ bool MpcNode::waitForState(double sim_time, StateSnapshot& out) {
 }
 
 void MpcNode::lockstepLoop() {
+  enterOptimiserThread();
   const int steps_per_control =
       std::max(1, static_cast<int>(std::lround(1.0 / (params_.control_rate * params_.physics_timestep))));
   while (running_ && ros::ok()) {

@@ -45,11 +45,13 @@
 
 #include "adroit_core/model_tables.h"
 #include "adroit_core/mujoco_model.h"
+#include "adroit_core/pi_mutex.h"
 #include "adroit_mpc/MpcConfig.h"
 #include "adroit_mpc/planner.h"
 #include "adroit_mpc/task.h"
 #include "adroit_ros/diagnostics.h"
 #include "adroit_ros/params.h"
+#include "adroit_ros/realtime.h"
 
 namespace adroit::mpc_node {
 
@@ -68,8 +70,8 @@ struct MpcParams {
   double feedback_scale = 1.0;     // of the policy's gains at the control rate
   double marker_rate = 5;          // wall Hz, only while someone listens
   double diagnostics_period = 1.0;  // wall s
-  // Nice value of every thread of the node (adroit::runInBackground) but the control loop,
-  // which runs under SCHED_FIFO at control_priority (0: normal scheduling, niced too).
+  // Nice value of the optimiser (the planner thread and its workers; the control loop runs
+  // under SCHED_FIFO at control_priority, roscpp's threads at normal weight).
   int nice = 19;
   int control_priority = 10;  // below the pools' (15) and the driver's (20)
   // Lockstep: drive a paused simulation through /adroit/step.
@@ -153,6 +155,7 @@ class MpcNode {
   double stateAgeWall() const;  // wall s since the last accepted joint state (inf: none)
 
   // --- planning and control (mpc_ros.cpp) ---
+  void enterOptimiserThread();  // ~nice for this thread, then the planner (re)started from it
   void plannerLoop();
   void controlLoop();
   void lockstepLoop();
@@ -190,8 +193,10 @@ class MpcNode {
 
   MpcParams params_;
   ros::NodeHandle nh_, pnh_;
-  ros::CallbackQueue state_queue_;
-  std::unique_ptr<ros::AsyncSpinner> state_spinner_, default_spinner_;
+  // The driver's states on a thread of their own under SCHED_FIFO (above the control loop):
+  // marker building, a service or the optimiser never delays them.
+  rosutil::FifoCallbackQueue state_queue_;
+  std::unique_ptr<ros::AsyncSpinner> default_spinner_;
 
   ModelPtr model_;
   std::unique_ptr<ModelTables> tables_;
@@ -200,7 +205,9 @@ class MpcNode {
   std::vector<std::string> actuator_names_;
 
   // State store (state_mutex_): written by the state queue, copied by the other threads.
-  mutable std::mutex state_mutex_;
+  // Priority inheritance: the optimiser (nice 19) may hold it when the real-time state
+  // thread or control loop wants it.
+  mutable PiMutex state_mutex_;
   StateSnapshot incoming_;
   bool joints_seen_ = false, object_seen_ = false;
   std::vector<std::string> joint_map_names_;  // names of the message the map was built for

@@ -56,7 +56,7 @@ void MpcNode::onJointState(const sensor_msgs::JointState::ConstPtr& msg) {
     ROS_ERROR_THROTTLE(1.0, "adroit_mpc: rejected joint state: NaN or Inf in position or velocity");
     return;
   }
-  std::lock_guard<std::mutex> lock(state_mutex_);
+  std::lock_guard<PiMutex> lock(state_mutex_);
   if (m.name != joint_map_names_) joint_map_ok_ = rebuildJointMap(m.name);  // allocates only on a new layout
   if (!joint_map_ok_) {
     rejections_.count(kJointMissing);
@@ -113,7 +113,7 @@ void MpcNode::onOdometry(const nav_msgs::Odometry::ConstPtr& msg) {
   const double linear_body[3] = {v.x, v.y, v.z};
   mju_quat2Mat(rot, quat);
   mju_rotVecMat(linear_world, linear_body, rot);
-  std::lock_guard<std::mutex> lock(state_mutex_);
+  std::lock_guard<PiMutex> lock(state_mutex_);
   double* qpos = incoming_.qpos.data() + object_qpos_;
   double* qvel = incoming_.qvel.data() + object_dof_;
   qpos[0] = p.x, qpos[1] = p.y, qpos[2] = p.z;
@@ -126,7 +126,7 @@ void MpcNode::onOdometry(const nav_msgs::Odometry::ConstPtr& msg) {
 }
 
 bool MpcNode::latestState(StateSnapshot& out) {
-  std::lock_guard<std::mutex> lock(state_mutex_);
+  std::lock_guard<PiMutex> lock(state_mutex_);
   if (!joints_seen_ || (object_qpos_ >= 0 && !object_seen_)) return false;
   out.time = incoming_.time;
   out.object_time = incoming_.object_time;

@@ -5,6 +5,8 @@
 #include <adroit_mpc/fd_derivatives.h>
 #include <gtest/gtest.h>
 
+#include <string>
+
 using namespace adroit_mpc;
 
 namespace {
@@ -104,6 +106,78 @@ TEST(FdDerivatives, SkipHoldsEachComputedKnotAndAlwaysComputesTheLast) {
   EXPECT_GT((every.A[3] - every.A[0]).norm(), 1e-6);
   // dv'/dq = h * (-g / l) cos(q) for a point mass pendulum (damping aside): sign check.
   EXPECT_LT(every.A[0](1, 0), 0.0);
+}
+
+// Trees on a fixed base: an actuated double pendulum (a) with a slider (c) tied to it by a
+// fixed tendon, a free slider (b), and a slider (d) whose ball sits 'gap' above the pendulum's
+// tip (a contact once gap is within the margin).
+std::string treesXml(double gap) {
+  return R"(
+<mujoco><compiler autolimits="true"/>
+  <option timestep="0.01"/>
+  <worldbody>
+    <body name="base">
+      <body name="a1" pos="0 0 1"><joint name="a1" type="hinge" axis="0 1 0" damping="0.1"/>
+        <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.02" mass="0.5"/>
+        <body name="a2" pos="0.3 0 0"><joint name="a2" type="hinge" axis="0 1 0" damping="0.1"/>
+          <geom name="tip" type="sphere" pos="0.3 0 0" size="0.05" mass="0.3"/></body></body>
+      <body name="b" pos="1 0 0.5"><joint name="b" type="slide" axis="0 0 1" stiffness="20" damping="0.5"/>
+        <geom type="sphere" size="0.05" mass="0.2" contype="0" conaffinity="0"/></body>
+      <body name="c" pos="-1 0 0.5"><joint name="c" type="slide" axis="1 0 0" damping="0.3"/>
+        <geom type="sphere" size="0.05" mass="0.2" contype="0" conaffinity="0"/></body>
+      <body name="d" pos="0.6 0 )" + std::to_string(1.1 + gap) + R"("><joint name="d" type="slide" axis="0 0 1" damping="0.2"/>
+        <geom type="sphere" size="0.05" mass="0.1" margin="0.01"/></body>
+    </body>
+  </worldbody>
+  <tendon><fixed name="ac"><joint joint="a2" coef="0.1"/><joint joint="c" coef="1"/></fixed></tendon>
+  <actuator><motor joint="a1" ctrlrange="-3 3"/><motor tendon="ac" ctrlrange="-3 3"/>
+    <motor joint="b" ctrlrange="-1 1"/></actuator>
+</mujoco>)";
+}
+
+TEST(FdDerivatives, SeparatedTreesShareNudgedColumnsAndMatchOneColumnPerDof) {
+  for (const double gap : {0.2, 0.0}) {  // d far above the tip; d resting on it
+    auto m = adroit::loadModelString(treesXml(gap)).model;
+    ASSERT_EQ(m->nv, 5);
+    adroit::DataPtr d = adroit::makeData(m.get());
+    d->qpos[0] = 0.0, d->qvel[0] = 0.4, d->qvel[2] = -0.2, d->qvel[3] = 0.1;
+    for (int a = 0; a < m->nu; ++a) d->ctrl[a] = 0.3 * (a + 1) - 0.5;
+    mj_forward(m.get(), d.get());
+    const bool touching = gap == 0.0;
+    ASSERT_EQ(d->ncon > 0, touching) << "gap " << gap;
+    for (const bool centered : {false, true}) {
+      // MuJoCo's own differences, one column per DOF.
+      const int nx = 2 * m->nv;
+      Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> A_ref(nx, nx), B_ref(nx, m->nu);
+      adroit::DataPtr ref = adroit::copyData(m.get(), d.get());
+      mjd_transitionFD(m.get(), ref.get(), 1e-6, centered, A_ref.data(), B_ref.data(), nullptr, nullptr);
+      for (const bool group : {false, true}) {
+        FdDerivatives fd;
+        fd.initialize(m.get(), 1, 1, FdSettings{1e-6, centered, 1, group});
+        Eigen::MatrixXd A(nx, nx), B(nx, m->nu);
+        adroit::DataPtr work = adroit::copyData(m.get(), d.get());
+        const int columns = fd.knot(work.get(), 0, A, B);
+        // Trees: {a1 a2, c} by the tendon (+ d when it rests on the tip), {b}, {d}.
+        EXPECT_EQ(columns, group ? (touching ? 4 : 3) : 5) << "gap " << gap;
+        const double tolerance = group ? 1e-7 : 1e-12;  // grouped: the nudges share one solver run
+        EXPECT_LT((A - Eigen::MatrixXd(A_ref)).cwiseAbs().maxCoeff(), tolerance * (1 + A_ref.cwiseAbs().maxCoeff()))
+            << "gap " << gap << " centered " << centered << " grouped " << group;
+        EXPECT_LT((B - Eigen::MatrixXd(B_ref)).cwiseAbs().maxCoeff(), tolerance * (1 + B_ref.cwiseAbs().maxCoeff()));
+        if (!group) continue;
+        // Separated trees: exact zeros between b and the others (and d while it is in the air).
+        const int b = 2, dd = 4;
+        for (int other : {0, 1, 3, 4}) {
+          for (int rows : {0, m->nv})
+            for (int cols : {0, m->nv}) {
+              EXPECT_EQ(A(rows + b, cols + other), 0.0);
+              EXPECT_EQ(A(rows + other, cols + b), 0.0);
+            }
+        }
+        if (!touching) EXPECT_EQ(A(m->nv + dd, 0), 0.0);
+        else EXPECT_NE(A(m->nv + dd, 0), 0.0);  // the tip's angle moves the ball resting on it
+      }
+    }
+  }
 }
 
 TEST(FdDerivatives, BadSettingsAreRejected) {

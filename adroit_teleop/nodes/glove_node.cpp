@@ -17,6 +17,7 @@
 #include <std_msgs/Bool.h>
 
 #include "adroit_ros/diagnostics.h"
+#include "adroit_core/scheduling.h"
 #include "adroit_ros/node_main.h"
 #include "adroit_ros/params.h"
 #include "adroit_teleop/glove_driver.h"
@@ -26,7 +27,8 @@ namespace adroit::teleop {
 namespace {
 
 GloveDriverConfig readConfig(const rosutil::Params& p) {
-  p.checkKeys("", {"port", "baud", "sensors", "mode", "poll_rate", "stale_after", "retry_min", "retry_max"});
+  p.checkKeys("", {"port", "baud", "sensors", "mode", "poll_rate", "stale_after", "retry_min", "retry_max",
+                   "realtime_priority"});
   GloveDriverConfig c;
   c.port = p.string("port", "");
   if (c.port.empty()) p.fail("port", "is required: the glove's serial device (or the emulator's link)");
@@ -55,12 +57,19 @@ const char* stateName(GloveDriver::State s) {
 
 class GloveNode {
  public:
-  GloveNode(ros::NodeHandle nh, ros::NodeHandle pnh) : driver_(readConfig(rosutil::Params(pnh))) {
+  GloveNode(ros::NodeHandle nh, ros::NodeHandle pnh)
+      : driver_(readConfig(rosutil::Params(pnh))),
+        // The reading thread and roscpp's threads under SCHED_FIFO (adroit_ros/realtime.h): the
+        // records are the teleop's command path. 0 = normal scheduling.
+        realtime_priority_(rosutil::Params(pnh).integer("realtime_priority", 13, 0, 98)) {
     ros::NodeHandle io(nh, "adroit_teleop");
     glove_pub_ = io.advertise<adroit_msgs::GloveSensors>("glove", 50);
     stale_pub_ = io.advertise<std_msgs::Bool>("glove_stale", 1, true);
     diag_pub_ = nh.advertise<diagnostic_msgs::DiagnosticArray>("/adroit/diagnostics", 5);
     diag_timer_ = nh.createWallTimer(ros::WallDuration(1.0), &GloveNode::onDiagnostics, this);
+    std::string error;
+    if (realtime_priority_ > 0 && !rosutil::fifoRosThreads(realtime_priority_, &error))
+      ROS_WARN("adroit_teleop glove: roscpp's threads keep normal scheduling (%s)", error.c_str());
     thread_ = std::thread(&GloveNode::loop, this);
   }
   ~GloveNode() {
@@ -70,6 +79,10 @@ class GloveNode {
 
  private:
   void loop() {
+    std::string why;
+    if (realtime_priority_ > 0 && !enterFifo(realtime_priority_, &why))
+      ROS_WARN("adroit_teleop glove: ~realtime_priority %d: SCHED_FIFO not permitted (%s); reading at normal "
+               "scheduling", realtime_priority_, why.c_str());
     std::vector<GloveDriver::Record> records;
     adroit_msgs::GloveSensors msg;
     bool stale_published = false, stale_known = false;
@@ -148,6 +161,7 @@ class GloveNode {
   std::uint64_t received_ = 0, received_at_last_ = 0;
   ros::Publisher glove_pub_, stale_pub_, diag_pub_;
   ros::WallTimer diag_timer_;
+  int realtime_priority_;
   std::atomic<bool> running_{true};
   std::thread thread_;
 };

@@ -38,6 +38,8 @@
 #include "adroit_ros/diagnostics.h"
 #include "adroit_ros/node_main.h"
 #include "adroit_ros/params.h"
+#include "adroit_ros/realtime.h"
+#include "adroit_core/pi_mutex.h"
 #include "adroit_teleop/calibration_session.h"
 #include "adroit_teleop/glove_protocol.h"
 #include "adroit_teleop/tendon_mapping.h"
@@ -51,11 +53,12 @@ struct TeleopParams {
   MappingGains gains;
   double stale_after = 0.1, command_rate = 200.0, record_window = 0.3;
   bool start_enabled = false;
+  int realtime_priority = 12;  // SCHED_FIFO of the input queue and roscpp's threads; 0 = normal
 };
 
 TeleopParams readParams(const rosutil::Params& p) {
   p.checkKeys("", {"scene", "model_file", "calibration", "poses", "mode", "gains", "stale_after", "command_rate",
-                   "record_window", "start_enabled", "task"});
+                   "record_window", "start_enabled", "task", "realtime_priority"});
   p.checkKeys("gains", {"stiffness", "damping", "min_tension", "scale"});
   TeleopParams t;
   t.model_path = p.modelPath("teleop_tube");
@@ -79,6 +82,7 @@ TeleopParams readParams(const rosutil::Params& p) {
   t.record_window = p.number("record_window", t.record_window, 0.02, 10.0);
   t.start_enabled = p.boolean("start_enabled", t.start_enabled);
   t.task = p.string("task", "");  // free text for recorded demonstrations, e.g. "pickup"
+  t.realtime_priority = p.integer("realtime_priority", t.realtime_priority, 0, 98);
   return t;
 }
 
@@ -114,8 +118,11 @@ class TeleopNode {
     enabled_pub_ = io.advertise<std_msgs::Bool>("enabled", 1, true);
     metadata_pub_ = io.advertise<std_msgs::String>("metadata", 1, true);
     diag_pub_ = adroit.advertise<diagnostic_msgs::DiagnosticArray>("diagnostics", 5);
-    glove_sub_ = io.subscribe("glove", 20, &TeleopNode::onGlove, this, hints);
-    joints_sub_ = adroit.subscribe("joint_states", 20, &TeleopNode::onJoints, this, hints);
+    ros::NodeHandle glove_input(io), joint_input(adroit);
+    glove_input.setCallbackQueue(input_queue_.queue());
+    joint_input.setCallbackQueue(input_queue_.queue());
+    glove_sub_ = glove_input.subscribe("glove", 20, &TeleopNode::onGlove, this, hints);
+    joints_sub_ = joint_input.subscribe("joint_states", 20, &TeleopNode::onJoints, this, hints);
     deadman_sub_ = io.subscribe("deadman", 10, &TeleopNode::onDeadman, this);
     safe_sub_ = adroit.subscribe("safe_state", 1, &TeleopNode::onSafeState, this);
     driver_diag_sub_ = adroit.subscribe("diagnostics", 10, &TeleopNode::onDriverDiagnostics, this);
@@ -125,6 +132,11 @@ class TeleopNode {
     diag_timer_ = nh.createWallTimer(ros::WallDuration(1.0), &TeleopNode::onDiagnostics, this);
     publishEnabled();
     publishMetadata();
+    input_queue_.start(params_.realtime_priority);
+    std::string error;
+    if (params_.realtime_priority > 0 && !rosutil::fifoRosThreads(params_.realtime_priority, &error))
+      ROS_WARN("adroit_teleop: roscpp's threads keep normal scheduling (%s): on a busy machine glove records may "
+               "arrive late", error.c_str());
     ROS_INFO("adroit_teleop: %s mode, calibration %s (%d sensors -> %d joints), model %s, dead-man %s", params_.mode.c_str(),
              params_.calibration_path.c_str(), calibration_.sensors(), calibration_.joints(), params_.model_path.c_str(),
              enabled_ ? "pressed" : "released");
@@ -133,7 +145,7 @@ class TeleopNode {
  private:
   // --- glove and joints -> commands --------------------------------------------------------
   void onGlove(const adroit_msgs::GloveSensors::ConstPtr& msg) {
-    std::lock_guard<std::mutex> lock(mutex_);
+    std::lock_guard<PiMutex> lock(mutex_);
     ++glove_records_;
     if (static_cast<int>(msg->raw.size()) != calibration_.sensors()) {
       ++glove_rejected_;
@@ -157,7 +169,7 @@ class TeleopNode {
   }
 
   void onJoints(const sensor_msgs::JointState::ConstPtr& msg) {
-    std::lock_guard<std::mutex> lock(mutex_);
+    std::lock_guard<PiMutex> lock(mutex_);
     if (!mapping_ && !buildMapping(*msg)) return;
     if (msg->position.size() != q_.size() || msg->velocity.size() != q_.size()) return;
     q_ = msg->position;
@@ -247,7 +259,7 @@ class TeleopNode {
   bool setEnabled(bool pressed, std::string& message) {
     bool release = false;
     {
-      std::lock_guard<std::mutex> lock(mutex_);
+      std::lock_guard<PiMutex> lock(mutex_);
       if (pressed == enabled_) {
         message = pressed ? "already commanding" : "already released";
         return true;
@@ -272,7 +284,7 @@ class TeleopNode {
   }
 
   void onSafeState(const std_msgs::Bool::ConstPtr& msg) {
-    std::lock_guard<std::mutex> lock(mutex_);
+    std::lock_guard<PiMutex> lock(mutex_);
     safe_state_ = msg->data;
   }
 
@@ -282,7 +294,7 @@ class TeleopNode {
       const auto estop = diagnosticValue(s, "estop_latched");
       const auto fault = diagnosticValue(s, "fault_latched");
       if (!watchdog || !estop || !fault) continue;  // not the driver's status
-      std::lock_guard<std::mutex> lock(mutex_);
+      std::lock_guard<PiMutex> lock(mutex_);
       watchdog_only_latch_ = *watchdog == "true" && *estop == "false" && *fault == "false";
     }
   }
@@ -328,7 +340,7 @@ class TeleopNode {
       } else if (req.action == "fit") {
         fitAndLoad(req.output.empty() ? params_.calibration_path : req.output, res);
       } else if (req.action == "cancel") {
-        std::lock_guard<std::mutex> lock(mutex_);
+        std::lock_guard<PiMutex> lock(mutex_);
         session_.reset();
         res.success = true;
         res.message = "calibration cancelled; the previous calibration stays";
@@ -354,7 +366,7 @@ class TeleopNode {
   void startCalibration(adroit_msgs::Calibrate::Response& res) {
     if (params_.poses_path.empty()) throw CalibrationError("~poses names no pose file");
     CalibrationPoseSet poses = loadCalibrationPoses(params_.poses_path, jointRangesFromModel(model_.get()));
-    std::lock_guard<std::mutex> lock(mutex_);
+    std::lock_guard<PiMutex> lock(mutex_);
     session_.emplace(std::move(poses), calibration_.sensors());
     res.success = true;
     res.message = std::to_string(session_->poses().poses.size()) + " poses from " + params_.poses_path;
@@ -364,7 +376,7 @@ class TeleopNode {
   void recordPose(adroit_msgs::Calibrate::Response& res) {
     std::string pose;
     {
-      std::lock_guard<std::mutex> lock(mutex_);
+      std::lock_guard<PiMutex> lock(mutex_);
       if (!session_) throw CalibrationError("no calibration running: call start first");
       if (!session_->current()) throw CalibrationError("every pose is recorded: call fit");
       pose = session_->current()->name;
@@ -372,7 +384,7 @@ class TeleopNode {
     }
     // The glove callback adds readings meanwhile (other spinner threads).
     ros::WallDuration(params_.record_window).sleep();
-    std::lock_guard<std::mutex> lock(mutex_);
+    std::lock_guard<PiMutex> lock(mutex_);
     if (!session_) throw CalibrationError("calibration cancelled while recording");
     const std::size_t n = session_->readings();
     session_->record();
@@ -382,7 +394,7 @@ class TeleopNode {
   }
 
   void fitAndLoad(const std::string& path, adroit_msgs::Calibrate::Response& res) {
-    std::lock_guard<std::mutex> lock(mutex_);
+    std::lock_guard<PiMutex> lock(mutex_);
     if (!session_) throw CalibrationError("no calibration running: call start first");
     GloveCalibration fitted = session_->fit();
     char created[32];
@@ -408,7 +420,7 @@ class TeleopNode {
   // --- diagnostics -------------------------------------------------------------------------
   void onDiagnostics(const ros::WallTimerEvent&) {
     rosutil::StatusBuilder s("adroit_teleop: teleop", "glove teleop");
-    std::lock_guard<std::mutex> lock(mutex_);
+    std::lock_guard<PiMutex> lock(mutex_);
     s.add("mode", params_.mode);
     s.add("deadman_pressed", enabled_);
     s.add("glove_stale", glove_stale_ || glove_q_.size() == 0);
@@ -427,7 +439,9 @@ class TeleopNode {
   GloveCalibration calibration_;
   ModelPtr model_;
 
-  std::mutex mutex_;  // everything below, between the spinner threads
+  // Everything below, between the input queue and the spinner threads. Priority inheritance:
+  // a spinner thread holding it runs at the input queue's priority while that waits.
+  PiMutex mutex_;
   std::optional<TendonMapping> mapping_;
   std::optional<CalibrationSession> session_;
   std::vector<int> target_index_;
@@ -442,6 +456,10 @@ class TeleopNode {
   sensor_msgs::JointState target_msg_;
 
   ros::Publisher force_pub_, reference_pub_, target_pub_, enabled_pub_, metadata_pub_, diag_pub_;
+  // Glove records and joint states, the commands' path, on a thread of their own under
+  // SCHED_FIFO (~realtime_priority; adroit_ros/realtime.h): at normal scheduling a busy machine
+  // held them back until the driver's watchdog tripped. Declared before their subscribers.
+  rosutil::FifoCallbackQueue input_queue_;
   ros::Subscriber glove_sub_, joints_sub_, deadman_sub_, safe_sub_, driver_diag_sub_;
   ros::ServiceClient release_client_;
   std::vector<ros::ServiceServer> services_;

@@ -291,6 +291,11 @@ TEST(GloveEmulatorProgram, BadOptionsAndFilesExitWithStatus2) {
     EXPECT_EQ(emu.finish(0), 2);
   }
   {
+    Emulator emu(dir, {"--realtime-priority", "120"});
+    EXPECT_EQ(emu.finish(0), 2);
+    EXPECT_NE(emu.output().find("--realtime-priority must be in 0..99"), std::string::npos) << emu.output();
+  }
+  {
     Emulator emu(dir, {"--unplug-after", "1"});
     EXPECT_EQ(emu.finish(0), 2);
   }

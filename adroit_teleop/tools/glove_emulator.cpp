@@ -8,9 +8,15 @@
 //   glove_emulator --sensors 18 --rate 500 --log /tmp/glove.log
 //   glove_emulator --trajectory recorded.csv --garbage-every 50 --unplug-after 5 --unplug-for 2
 //
+// --realtime-priority P streams under SCHED_FIFO P (it sleeps in ppoll between records): a real
+// glove streams from its own processor whatever the host does, and at normal scheduling the
+// emulator missed its deadlines for 100 ms on a busy 2-core machine, long enough for the
+// teleop node to call the glove stale.
+//
 // Exit status: 0 after SIGINT/SIGTERM or --duration, 2 for bad options or a bad trajectory
 // file (message names the file and line), 1 when the pseudo-terminal cannot be set up.
 #include <adroit_core/command_line.h>
+#include <adroit_core/scheduling.h>
 #include <adroit_teleop/glove_emulator.h>
 #include <adroit_teleop/pseudo_terminal.h>
 #include <poll.h>
@@ -34,7 +40,7 @@ namespace {
 const char* kUsage =
     "usage: glove_emulator [--link PATH] [--sensors 18|22] [--rate HZ] [--trajectory synthetic|FILE.csv]\n"
     "                      [--period S] [--garbage-every K] [--unplug-after S --unplug-for S] [--glove-error]\n"
-    "                      [--log FILE] [--seed N] [--duration S]";
+    "                      [--log FILE] [--seed N] [--duration S] [--realtime-priority P]";
 
 volatile sig_atomic_t g_stop = 0;
 void onSignal(int) { g_stop = 1; }
@@ -70,6 +76,7 @@ long long realtimeNs() {
 int main(int argc, char** argv) {
   std::string link = "/tmp/adroit_glove", trajectory = "synthetic", log_path;
   double period = 4, unplug_after = 0, unplug_for = 0, duration = 0;
+  int realtime_priority = 0;
   EmulatorOptions options;
   // roslaunch appends its remappings (__name:=..., __log:=...): not options of ours.
   std::vector<char*> kept;
@@ -89,6 +96,7 @@ int main(int argc, char** argv) {
     else if (args.is("--log")) log_path = args.text();
     else if (args.is("--seed")) options.seed = static_cast<std::uint32_t>(args.integer());
     else if (args.is("--duration")) duration = args.number();
+    else if (args.is("--realtime-priority")) realtime_priority = static_cast<int>(args.integer());
     else args.unknown();
   }
   if (!validSensorCount(options.sensors)) args.fail("--sensors must be 18 or 22");
@@ -99,6 +107,7 @@ int main(int argc, char** argv) {
     args.fail("--unplug-after and --unplug-for go together, both > 0 s");
   if (duration < 0) args.fail("--duration must be >= 0 s (0: until SIGINT/SIGTERM)");
   if (link.empty()) args.fail("--link needs a path");
+  if (realtime_priority < 0 || realtime_priority > 99) args.fail("--realtime-priority must be in 0..99 (0: normal scheduling)");
 
   std::shared_ptr<const GloveTrajectory> motion;
   try {
@@ -145,6 +154,11 @@ int main(int argc, char** argv) {
   std::printf("glove_emulator: %d sensors on %s, link %s, streaming at %g Hz\n", options.sensors,
               pty->slaveName().c_str(), link.c_str(), options.rate_hz);
   std::fflush(stdout);
+
+  std::string refused;
+  if (realtime_priority > 0 && !adroit::enterFifo(realtime_priority, &refused))
+    std::fprintf(stderr, "glove_emulator: --realtime-priority %d: SCHED_FIFO not permitted (%s); streaming at normal "
+                 "scheduling\n", realtime_priority, refused.c_str());
 
   const timespec start = monotonicNow();
   bool unplugged = false, replugged = false;

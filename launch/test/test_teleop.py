@@ -4,6 +4,7 @@ nothing is commanded while the dead-man is released; pressed, the simulated fing
 the calibrated glove targets and every command's latency is reported by the driver; the glove
 unplugged stops the commands (the driver's watchdog takes over), and commanding resumes only
 after the glove is back and the dead-man is pressed again."""
+import bisect
 import threading
 import time
 import unittest
@@ -23,18 +24,26 @@ FOLLOWED = ["FFJ2", "MFJ2", "RFJ2", "LFJ2", "FFJ1", "MFJ1", "WRJ0"]
 
 
 class Recorder:
-    """The newest messages and their arrival times, shared with the test thread."""
+    """The newest messages and their arrival times, shared with the test thread. `streams`
+    names the ones to record (every subscriber adds to the publishers' real-time work: the
+    driver's latency topic alone is a message per command)."""
 
-    def __init__(self):
+    TOPICS = {
+        "glove": ("/adroit_teleop/glove", GloveSensors),
+        "commands": ("/adroit/tendon_force_command", TendonForceCommand),
+        "latency": ("/adroit/command_latency", CommandLatency),
+        "safe": ("/adroit/safe_state", Bool),
+        "targets": ("/adroit_teleop/joint_targets", JointState),
+        "joints": ("/adroit/joint_states", JointState),
+    }
+
+    def __init__(self, streams=tuple(TOPICS)):
         self.lock = threading.Lock()
-        self.glove, self.commands, self.latency, self.safe = [], [], [], []
-        self.targets, self.joints = [], []
-        rospy.Subscriber("/adroit_teleop/glove", GloveSensors, self.on(self.glove))
-        rospy.Subscriber("/adroit/tendon_force_command", TendonForceCommand, self.on(self.commands))
-        rospy.Subscriber("/adroit/command_latency", CommandLatency, self.on(self.latency))
-        rospy.Subscriber("/adroit/safe_state", Bool, self.on(self.safe))
-        rospy.Subscriber("/adroit_teleop/joint_targets", JointState, self.on(self.targets))
-        rospy.Subscriber("/adroit/joint_states", JointState, self.on(self.joints))
+        for name in self.TOPICS:
+            setattr(self, name, [])
+        for name in streams:
+            topic, kind = self.TOPICS[name]
+            rospy.Subscriber(topic, kind, self.on(getattr(self, name)))
 
     def on(self, store):
         def callback(msg):
@@ -47,10 +56,19 @@ class Recorder:
             return [m for t, m in store if t >= t0]
 
 
-def interpolate(samples, stamp):
-    """Position dict of the joint_states sample nearest to stamp."""
-    best = min(samples, key=lambda m: abs((m.header.stamp - stamp).to_sec()))
-    return dict(zip(best.name, best.position))
+class Nearest:
+    """Position dicts of the joint_states samples nearest to given stamps (the samples in arrival
+    order, which is stamp order: a bisection per stamp, not a scan of thousands of samples)."""
+
+    def __init__(self, samples):
+        self.samples = samples
+        self.stamps = [m.header.stamp.to_sec() for m in samples]
+
+    def at(self, stamp):
+        t = stamp.to_sec()
+        i = bisect.bisect_left(self.stamps, t)
+        k = min((k for k in (i - 1, i) if 0 <= k < len(self.samples)), key=lambda k: abs(self.stamps[k] - t))
+        return dict(zip(self.samples[k].name, self.samples[k].position))
 
 
 class TeleopPipeline(unittest.TestCase):
@@ -78,12 +96,12 @@ class TeleopPipeline(unittest.TestCase):
         commands = rec.since(rec.commands, pressed + 1.0)
         self.assertGreater(len(commands) / 6.0, 110, "commands at less than the glove rate")
         targets = rec.since(rec.targets, pressed + 2.0)
-        joints = rec.since(rec.joints, pressed + 1.5)
+        joints = Nearest(rec.since(rec.joints, pressed + 1.5))
         errors = {j: [] for j in FOLLOWED}
         spans = {j: [] for j in FOLLOWED}
         for target in targets[::10]:
             want = dict(zip(target.name, target.position))
-            have = interpolate(joints, target.header.stamp + rospy.Duration(0.1))  # ~ the hand's lag
+            have = joints.at(target.header.stamp + rospy.Duration(0.1))  # ~ the hand's lag
             for j in FOLLOWED:
                 errors[j].append(have[j] - want[j])
                 spans[j].append(want[j])

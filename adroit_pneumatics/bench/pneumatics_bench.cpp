@@ -38,6 +38,7 @@
 #include <vector>
 
 #include "adroit_core/scheduling.h"
+#include "adroit_core/slowdown_probe.h"
 #include "adroit_core/thread_pool.h"
 #include "adroit_core/timing_stats.h"
 #include "adroit_pneumatics/excitation.h"
@@ -483,50 +484,6 @@ double stepFloorRmse(const Rig& rig, const Profile& prof, double seconds, const 
   return std::sqrt(sq / static_cast<double>(subs - skip));
 }
 
-// The machine's own speed while a layout runs: a thread under SCHED_FIFO (so the pools' threads
-// never preempt it) does a fixed piece of work every 5 ms and times it against the fastest it
-// ever took. A shared virtual machine can run all its threads several times slower for a while
-// (this development VM: 4-15x for 100-200 ms about every 1.5 s, with nothing else running);
-// then a pool's solve takes as many times longer, which no wake-up lag of a bare thread shows.
-class SlowdownProbe {
- public:
-  SlowdownProbe() : thread_([this] { run(); }) {}
-  ~SlowdownProbe() { stop(); }
-  void stop() {
-    running_ = false;
-    if (thread_.joinable()) thread_.join();
-  }
-  // Slowdowns (work time / fastest work time), one per 5 ms; empty if SCHED_FIFO was refused.
-  const adroit::SampleStats& slowdowns() const { return slowdowns_; }
-
- private:
-  static double work() {  // ~50 us of arithmetic at full speed on this VM
-    volatile double x = 1.0;
-    for (int i = 0; i < 12000; ++i) x = x * 1.0000001 + 1e-9;
-    return x;
-  }
-  void run() {
-    std::string error;
-    if (!adroit::enterFifo(1, &error)) return;
-    double fastest = std::numeric_limits<double>::infinity();
-    std::vector<double> times;
-    auto next = std::chrono::steady_clock::now();
-    while (running_) {
-      adroit::Stopwatch sw;
-      work();
-      const double t = sw.elapsed();
-      fastest = std::min(fastest, t);
-      times.push_back(t);
-      next += std::chrono::microseconds(5000);
-      std::this_thread::sleep_until(next);
-    }
-    for (double t : times) slowdowns_.add(t / fastest);
-  }
-  std::atomic<bool> running_{true};
-  adroit::SampleStats slowdowns_;
-  std::thread thread_;
-};
-
 // ---------------------------------------------------------------- 4. pool timing
 struct PoolTiming {
   adroit::SampleStats solve, lag, slowdown;
@@ -559,7 +516,9 @@ PoolTiming poolTiming(const ParametricModel& model, const IlqgParams& params, in
   const auto period = std::chrono::microseconds(5000);
   const auto start = std::chrono::steady_clock::now() + std::chrono::milliseconds(20);
   const int cycles = static_cast<int>(seconds / kTick);
-  SlowdownProbe probe;
+  // The machine's own speed meanwhile (adroit_core/slowdown_probe.h), under SCHED_FIFO 1 so the
+  // layout's threads (normal scheduling here) never preempt it.
+  adroit::SlowdownProbe probe(1);
   for (int p = 0; p < pools; ++p) {
     threads.emplace_back([&, p] {
       const auto phase = staggered ? period * p / pools : std::chrono::microseconds(0);

@@ -61,7 +61,7 @@ class GloveNode {
       : driver_(readConfig(rosutil::Params(pnh))),
         // The reading thread and roscpp's threads under SCHED_FIFO (adroit_ros/realtime.h): the
         // records are the teleop's command path. 0 = normal scheduling.
-        realtime_priority_(rosutil::Params(pnh).integer("realtime_priority", 13, 0, 98)) {
+        realtime_priority_(rosutil::Params(pnh).integer("realtime_priority", 16, 0, 98)) {
     ros::NodeHandle io(nh, "adroit_teleop");
     glove_pub_ = io.advertise<adroit_msgs::GloveSensors>("glove", 50);
     stale_pub_ = io.advertise<std_msgs::Bool>("glove_stale", 1, true);

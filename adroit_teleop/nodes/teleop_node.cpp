@@ -53,7 +53,7 @@ struct TeleopParams {
   MappingGains gains;
   double stale_after = 0.1, command_rate = 200.0, record_window = 0.3;
   bool start_enabled = false;
-  int realtime_priority = 12;  // SCHED_FIFO of the input queue and roscpp's threads; 0 = normal
+  int realtime_priority = 16;  // SCHED_FIFO of the input queue and roscpp's threads; 0 = normal
 };
 
 TeleopParams readParams(const rosutil::Params& p) {
@@ -204,6 +204,11 @@ class TeleopNode {
   // Commands the robot if the dead-man is pressed, the glove fresh and the hand's state known.
   void command() {
     const ros::WallTime now = ros::WallTime::now();
+    // Time this queue itself was held up (a busy machine) does not count against the glove:
+    // its records may be waiting in the queue behind the joint state being handled now.
+    const double held_up = (now - last_input_wall_).toSec() - kInputGap;
+    if (!last_input_wall_.isZero() && held_up > 0) last_glove_wall_ += ros::WallDuration(held_up);
+    last_input_wall_ = now;
     const bool fresh = glove_q_.size() > 0 && (now - last_glove_wall_).toSec() <= params_.stale_after;
     if (!fresh && glove_q_.size() > 0 && !glove_stale_) {
       glove_stale_ = true;
@@ -449,7 +454,8 @@ class TeleopNode {
   bool have_q_ = false, enabled_ = false, glove_stale_ = false, safe_state_ = false, watchdog_only_latch_ = false;
   Eigen::VectorXd sensors_, glove_q_;
   ros::Time glove_stamp_;
-  ros::WallTime last_glove_wall_, last_command_wall_;
+  ros::WallTime last_glove_wall_, last_command_wall_, last_input_wall_;
+  static constexpr double kInputGap = 0.01;  // s: joint states come every 2-4 ms, glove records every 8 ms
   std::uint64_t glove_records_ = 0, glove_rejected_ = 0, commands_ = 0, commands_refused_ = 0;
   adroit_msgs::TendonForceCommand force_msg_;
   adroit_msgs::ForceReference reference_msg_;

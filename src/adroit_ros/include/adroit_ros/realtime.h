@@ -18,9 +18,11 @@
 //     queue: roscpp disables that queue at shutdown, and a SCHED_FIFO thread spinning on it
 //     kept the cores from the thread that completes the shutdown.
 //
-// Priorities (one place): driver simulation 20, its publisher 19, its safety queue 18, its
-// roscpp threads 17; pools' input queue and roscpp threads 16, tick 15, publisher 14; glove
-// reader 13; teleop's and the MPC's input queues and roscpp threads 12; MPC control loop 10.
+// Priorities (one place): CAN emulator (the robot's boards) 30; hardware driver 20, simulation
+// physics 9; the driver's publisher 19, safety queue 18, roscpp threads 17; pools' input queue,
+// publisher and roscpp threads 16, glove reader and teleop's input queue and roscpp threads 16
+// (light work with deadlines: above the pools' solves), pools' tick 15; the MPC's input queue
+// and roscpp threads 12; MPC control loop 10.
 #pragma once
 
 #include <atomic>

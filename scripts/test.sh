@@ -32,13 +32,14 @@ echo "sanitizer stage (ASan+UBSan build and gtests): $((SECONDS - sanitizer_star
 "$here/test_fuzz.sh" 60 || failed_commands+=("fuzz stage")
 
 # The workspace scripts' own tests (the result counting below; that no core library links a
-# ROS library), one result file each, through catkin's wrapper like every package test: no
-# result file gives a MISSING failure.
-for t in test_count_results test_core_links; do
-  result="$WS_ROOT/build/workspace_scripts/test_results/workspace_scripts/pytest-$t.xml"
+# ROS library) and the real-time tests' machine probe guard, one result file each, through
+# catkin's wrapper like every package test: no result file gives a MISSING failure.
+for t in scripts/test_count_results scripts/test_core_links launch/test/test_machine_probe; do
+  name="$(basename "$t")"
+  result="$WS_ROOT/build/workspace_scripts/test_results/workspace_scripts/pytest-$name.xml"
   python3 /usr/share/catkin/cmake/test/run_tests.py --return-code "$result" \
-    "python3 -m pytest -q -p no:cacheprovider $here/$t.py --junitxml=$result" \
-    || failed_commands+=("pytest $t")
+    "python3 -m pytest -q -p no:cacheprovider $WS_ROOT/$t.py --junitxml=$result" \
+    || failed_commands+=("pytest $name")
 done
 
 args=()

@@ -906,14 +906,12 @@ int main(int argc, char** argv) {
           std::printf("  (no slowdown probe: SCHED_FIFO not permitted)\n");
         } else {
           const adroit::Summary s = t.slowdown.summary();
-          std::size_t slow = 0;
-          for (double x : t.slowdown.samples()) slow += x > 2.0;
           const double solve = t.solve.summary().median * 1e3, work = solve * pools;
           const double capacity = std::thread::hardware_concurrency() * kTick * 1e3;
           std::printf("  bound: the machine computed up to %.1fx slower during %s (p99 %.1fx; %.1f %% of the time\n"
                       "  over 2x): a pool's median solve of %.3f ms then takes %.2f ms (p99 slowdown), and the\n"
                       "  layout's %.2f ms of work per tick %.1f ms at the worst, of the %.0f ms the cores have\n",
-                      s.max, cfg.c_str(), s.p99, 100.0 * slow / t.slowdown.samples().size(), solve, solve * s.p99,
+                      s.max, cfg.c_str(), s.p99, 100.0 * adroit::fractionAbove(t.slowdown, 2.0), solve, solve * s.p99,
                       work, work * s.max, capacity);
         }
       }

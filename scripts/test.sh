@@ -34,7 +34,7 @@ echo "sanitizer stage (ASan+UBSan build and gtests): $((SECONDS - sanitizer_star
 # The workspace scripts' own tests (the result counting below; that no core library links a
 # ROS library) and the real-time tests' machine probe guard, one result file each, through
 # catkin's wrapper like every package test: no result file gives a MISSING failure.
-for t in scripts/test_count_results scripts/test_core_links launch/test/test_machine_probe; do
+for t in scripts/test_count_results scripts/test_core_links src/adroit_core/tools/test_machine_probe; do
   name="$(basename "$t")"
   result="$WS_ROOT/build/workspace_scripts/test_results/workspace_scripts/pytest-$name.xml"
   python3 /usr/share/catkin/cmake/test/run_tests.py --return-code "$result" \

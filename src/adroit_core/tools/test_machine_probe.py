@@ -1,5 +1,5 @@
 """unless_the_machine_slowed (machine_probe.py): a failure is skipped only when the probe saw the
-machine itself slow down, and the probe is stopped whatever happens."""
+machine itself slow down, the probe is stopped whatever happens, and a skip reaches the count."""
 import os
 import sys
 import unittest
@@ -7,7 +7,10 @@ import unittest
 import pytest
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from machine_probe import SLOW_FRACTION, unless_the_machine_slowed  # noqa: E402
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "..", "scripts"))
+import machine_probe  # noqa: E402
+from count_results import read_cases  # noqa: E402
+from machine_probe import SLOW_FRACTION, mark_probe_skips, unless_the_machine_slowed  # noqa: E402
 
 
 class FakeProbe:
@@ -41,6 +44,24 @@ def test_a_failure_while_the_machine_slowed_down_is_skipped_with_both_reasons():
         with unless_the_machine_slowed(Case(), probe):
             raise AssertionError("rms error 0.5 rad")
     assert "rms error 0.5 rad" in str(skipped.value) and "over 2x" in str(skipped.value)
+
+
+def test_the_skip_is_written_into_the_result_file(tmp_path, monkeypatch):
+    # rosunit writes a skipped case as passed: the count reads <skipped> from the file.
+    result = tmp_path / "rosunit-case.xml"
+    result.write_text('<testsuite><testcase classname="c" name="runTest"/><testcase classname="c" name="other"/>'
+                      '</testsuite>')
+    monkeypatch.setattr(sys, "argv", ["test", "--gtest_output=xml:%s" % result])
+    monkeypatch.setattr(machine_probe, "SKIPPED", [])
+    mark_probe_skips()  # nothing skipped: the file stays as it was
+    assert "skipped" not in result.read_text()
+    with pytest.raises(unittest.SkipTest):
+        with unless_the_machine_slowed(Case(), FakeProbe(SLOW_FRACTION * 3)):
+            raise AssertionError("watchdog tripped")
+    mark_probe_skips()
+    # Only the case that was skipped: the file's other cases keep their outcome.
+    assert [(name, outcome) for name, outcome, _ in read_cases(str(result))] == [("c.runTest", "skip"), ("c.other", "pass")]
+    assert "watchdog tripped" in result.read_text()
 
 
 def test_a_pass_stays_a_pass_and_other_errors_stay_errors():

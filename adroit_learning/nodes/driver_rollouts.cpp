@@ -26,6 +26,21 @@ constexpr int kSettleSteps = 2;
 constexpr double kKeepAlivePeriod = 0.01;
 // Below the simulation driver's threads (20, 19), above everything under normal scheduling.
 constexpr int kKeepAlivePriority = 10;
+// A one-shot service call that fails in transport is tried this often in all.
+constexpr int kCallAttempts = 3;
+
+// A one-shot (non-persistent) roscpp call now and then fails in transport on a loaded machine
+// (ros_comm #1976: the server's close is seen before its answer is read; CI once lost a
+// rollout to it). Pause and reset are idempotent, so such a failure is retried; an answer,
+// success or refusal, is final.
+template <class Service>
+bool callRetryingTransport(ros::ServiceClient& client, Service& service) {
+  for (int attempt = 1; attempt <= kCallAttempts; ++attempt) {
+    if (client.call(service)) return true;
+    if (attempt < kCallAttempts) client.waitForExistence(ros::Duration(0.5));
+  }
+  return false;
+}
 
 }  // namespace
 
@@ -179,7 +194,7 @@ bool DriverConnection::waitForStreams(std::string& error) {
   pause.request.data = true;
   adroit_msgs::Step step;
   step.request.steps = kSettleSteps;
-  if (!pause_client_.call(pause) || !step_client_.call(step) || !step.response.success) {
+  if (!callRetryingTransport(pause_client_, pause) || !step_client_.call(step) || !step.response.success) {
     error = "driver " + ns_ + ": could not pause and step it: " + pause.response.message + " " + step.response.message;
     return false;
   }
@@ -211,7 +226,7 @@ bool DriverConnection::reset(const std::vector<double>& qpos, const std::vector<
   if (pacing_ == Pacing::kLockstep) {  // stepping needs a paused driver
     std_srvs::SetBool pause;
     pause.request.data = true;
-    if (!pause_client_.call(pause) || !pause.response.success) {
+    if (!callRetryingTransport(pause_client_, pause) || !pause.response.success) {
       error = "driver " + ns_ + ": pause failed: " + pause.response.message;
       return false;
     }
@@ -219,11 +234,16 @@ bool DriverConnection::reset(const std::vector<double>& qpos, const std::vector<
   adroit_msgs::Reset reset;
   reset.request.qpos = qpos;
   reset.request.pressure = pressure;
-  const bool called = reset_client_.call(reset);
+  const bool called = callRetryingTransport(reset_client_, reset);
   if (called && !reset.response.success && pacing_ == Pacing::kRealtime &&
       reset.response.message.find("only in simulation") != std::string::npos)
     return resetByControl(pressure.size(), hold_volts, error);
-  if (!called || !reset.response.success) {
+  if (!called) {
+    error = "driver " + ns_ + ": no answer from " + reset_client_.getService() + " in " +
+            std::to_string(kCallAttempts) + " calls";
+    return false;
+  }
+  if (!reset.response.success) {
     error = "driver " + ns_ + ": reset refused: " + reset.response.message;
     return false;
   }

@@ -3,10 +3,17 @@
 // against predictive sampling, synergies on / off, force against pneumatic mode, on identical
 // trials. A program, not a test.
 //
-//   mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned]
+//   mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned,nocomp]
 //               [--out DIR] [--seed S] [--only-trial K] [--fixed-latency S] [--latency-sweep S,S,...]
 //               [--dt S] [--horizon S] [--skip K] [--sensed] [--feedback-scale F] [--contact M,S] [--events]
-//               [--set key=number]... [--pool ilqg_key=number]...
+//               [--compensation on|off|task] [--set key=number]... [--pool ilqg_key=number]...
+//
+// --compensation: latency compensation (latency_compensation.h: plan from the state the running
+// policy is predicted to reach when the plan takes over, at the planning latency: the fixed one,
+// else the median of the trial's last nine), as the node's ~latency_compensation; default: the
+// task's hint (type on). Variant nocomp is iLQG without it whatever the setting: its baseline.
+// The table's "start" column says how far each plan's starting state was from the state when it
+// took over (joint RMS, median): the prediction's error, or without it the measured state's age.
 //
 // --dt, --horizon, --skip override the task's planner_dt, horizon and derivative_skip hints
 // (defaults: config/tasks/<task>.yaml, else config/mpc.yaml's).
@@ -76,6 +83,7 @@
 #include <adroit_pneumatics/plant.h>
 #include <adroit_pneumatics/pool.h>
 #include <adroit_pneumatics/tracking_floor.h>
+#include <adroit_mpc/latency_compensation.h>
 #include <adroit_mpc/planner.h>
 #include <adroit_mpc/planning_model.h>
 #include <adroit_mpc/synergies.h>
@@ -117,6 +125,7 @@ struct Variant {
   bool pneumatic = false;  // valve commands from the pools tracking the plan (else tendon forces)
   bool open_loop_reference = false;  // pneumatic: the plan's tensions on each new plan only
   bool world_as_planned = false;  // the simulation runs the planning MJCF (diagnostic, see --variants)
+  bool compensate = true;  // plan from the state predicted at the expected latency (latency_compensation.h)
 };
 
 struct TrialSpec {
@@ -129,6 +138,10 @@ struct TrialSpec {
 struct TrialResult {
   bool success = false;
   double final_error = 0, lowest_z = 0, duration = 0, plan_ms_median = 0;
+  // Joints (hinge and slide) of the state each plan started from against the state when it took
+  // over, RMS, median over the plans: the prediction's error with latency compensation, the
+  // measured state's staleness without.
+  double start_error_median = 0;
   double farthest_from_grasp = 0;  // relocation, from the goal on: object centre to S_grasp (m)
   int keys_correct = 0, keys_total = 0, diverged = 0;
   std::vector<std::pair<double, double>> trace;  // (t, error)
@@ -223,6 +236,8 @@ class TrialRunner {
                                       : PlannerSettings{}.derivative_skip;
     feedback_scale_ = defaults.numbers.count("feedback_scale") ? paramNumber(task, defaults, "feedback_scale", 0, 1)
                                                                 : 1.0;
+    compensation_ = defaults.numbers.count("latency_compensation") &&
+                    paramNumber(task, defaults, "latency_compensation", 0, 1) > 0.5;
     settings_.synergies = variant.synergies;
     PlanningModelSettings ms;
     ms.timestep = settings_.dt;
@@ -232,6 +247,7 @@ class TrialRunner {
     const std::string share = descriptionShareDir();
     plan_model_ = loadPlanningModel(adroit::description::sceneFile(share, sceneOf(task), true), ms);
     observe_ = adroit::makeData(plan_model_.get());
+    predictor_.initialize(plan_model_.get());
 
     // The simulation driver's ROS-free core: physics, the pneumatic plant, sensors, safety.
     adroit::driver::SimConfig config;
@@ -295,7 +311,8 @@ class TrialRunner {
     TrialResult r;
     force_trace_.clear();
     r.lowest_z = 1e9;
-    std::vector<double> plan_seconds;
+    std::vector<double> plan_seconds, start_errors;
+    LatencyEstimate latency_estimate;
     PlanPolicy active, fresh;
     bool have_policy = false;
     Reference active_reference, fresh_reference;
@@ -320,11 +337,17 @@ class TrialRunner {
       }
       observeState(*task, state);
       planner->setTask(*task);
-      planner->setState(state);
+      // The running policy carries the world on while this optimisation computes (not while
+      // the world waits before the trial); the prediction's time counts as the plan's.
       adroit::Stopwatch clock;
+      if (variant_.compensate && compensation_ && warmup == 0 && have_policy)
+        predictor_.predict(active, feedback_scale_, fixed_latency_ >= 0 ? fixed_latency_ : latency_estimate.expected(),
+                           state);
+      planner->setState(state);
       const OptimizeReport report = planner->optimize();
       const double latency = fixed_latency_ >= 0 ? fixed_latency_ : clock.elapsed();
       plan_seconds.push_back(latency);
+      latency_estimate.record(latency);
       if (report.diverged) {
         ++r.diverged;
       } else {
@@ -349,6 +372,7 @@ class TrialRunner {
         }
       }
       if (!report.diverged) {
+        if (d->time >= release_time) start_errors.push_back(jointDistance(state.qpos));
         std::swap(active, fresh);
         std::swap(active_reference, fresh_reference);
         have_policy = true;
@@ -358,6 +382,7 @@ class TrialRunner {
     }
     r.duration = d->time - release_time;
     r.plan_ms_median = 1e3 * adroit::percentile(plan_seconds, 50);
+    r.start_error_median = start_errors.empty() ? 0 : adroit::percentile(start_errors, 50);
     if (task_name_ == "type") {
       auto& type = static_cast<TypeTask&>(*task);
       r.keys_total = static_cast<int>(spec.keys.size());
@@ -539,8 +564,24 @@ class TrialRunner {
   // instead of the true state, as the node does.
   void setSensed(bool sensed) { sensed_ = sensed; }
   void setFeedbackScale(double scale) { feedback_scale_ = scale; }
+  void setCompensation(bool on) { compensation_ = on; }
 
  private:
+  // RMS over the hinge and slide joints of qpos (planning model layout) against the simulation now.
+  double jointDistance(const std::vector<double>& qpos) const {
+    const mjModel* m = robot_->model();
+    const mjData* d = robot_->data();
+    double sum = 0;
+    int n = 0;
+    for (int j = 0; j < m->njnt; ++j) {
+      if (m->jnt_type[j] != mjJNT_HINGE && m->jnt_type[j] != mjJNT_SLIDE) continue;
+      const double e = qpos[m->jnt_qposadr[j]] - d->qpos[m->jnt_qposadr[j]];
+      sum += e * e;
+      ++n;
+    }
+    return n ? std::sqrt(sum / n) : 0;
+  }
+
   // The state the controller sees: the true one, or (sensed_) the true one with every 1-DOF
   // joint and the free object replaced by what the driver's sensors report.
   void measure(std::vector<double>& qpos, std::vector<double>& qvel) const {
@@ -626,6 +667,8 @@ class TrialRunner {
   Variant variant_;
   PlannerSettings settings_;
   adroit::ModelPtr plan_model_;
+  StatePredictor predictor_;
+  bool compensation_ = false;  // the task's hint unless --compensation
   adroit::DataPtr observe_;
   std::unique_ptr<adroit::driver::SimulatedRobot> robot_;
   std::vector<std::uint16_t> all_actuators_;
@@ -657,6 +700,7 @@ int main(int argc, char** argv) {
   double fixed_latency = -1;
   bool sensed = false;
   double feedback_scale = -1;  // the task's hint
+  std::string compensation = "task";  // on | off | task (its hint)
   double contact_margin = -1, contact_softness = -1;  // --contact M,S
   bool print_events = false;
   std::map<std::string, double> params;  // --set key=value
@@ -680,6 +724,7 @@ int main(int argc, char** argv) {
     else if (a == "--latency-sweep" && i + 1 < argc) sweep = split(argv[++i]);
     else if (a == "--sensed") sensed = true;
     else if (a == "--feedback-scale" && i + 1 < argc) feedback_scale = std::atof(argv[++i]);
+    else if (a == "--compensation" && i + 1 < argc) compensation = argv[++i];
     else if (a == "--contact" && i + 1 < argc && std::strchr(argv[i + 1], ',')) {
       contact_margin = std::atof(argv[++i]);
       contact_softness = std::atof(std::strchr(argv[i], ',') + 1);
@@ -702,15 +747,19 @@ int main(int argc, char** argv) {
     else {
       std::fprintf(stderr,
                    "usage: mpc_success [--trials N] [--tasks catch,relocate,type] "
-                   "[--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned] [--out DIR] [--seed S] "
+                   "[--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned,nocomp] [--out DIR] [--seed S] "
                    "[--only-trial K] [--fixed-latency S] [--latency-sweep S,S,...] [--dt S] [--horizon S] [--skip K] [--sensed] "
-                   "[--feedback-scale F] "
+                   "[--feedback-scale F] [--compensation on|off|task] "
                    "[--contact M,S] [--events] [--set key=number]... [--pool ilqg_key=number]...\n");
       return 2;
     }
   }
   if (trials < 1) {
     std::fprintf(stderr, "mpc_success: --trials must be at least 1\n");
+    return 2;
+  }
+  if (compensation != "task" && compensation != "on" && compensation != "off") {
+    std::fprintf(stderr, "mpc_success: --compensation must be on, off or task (the task's hint)\n");
     return 2;
   }
   if (feedback_scale != -1 && !(feedback_scale >= 0 && feedback_scale <= 1)) {
@@ -722,11 +771,12 @@ int main(int argc, char** argv) {
                                                 {"nosyn", {"nosyn", "ilqg", false}},
                                                 {"pneumatic", {"pneumatic", "ilqg", true, true}},
                                                 {"pneumatic_open", {"pneumatic_open", "ilqg", true, true, true}},
-                                                {"as_planned", {"as_planned", "ilqg", true, false, false, true}}};
+                                                {"as_planned", {"as_planned", "ilqg", true, false, false, true}},
+                                                {"nocomp", {"nocomp", "ilqg", true, false, false, false, false}}};
   std::vector<Variant> variants;
   for (const auto& v : split(variants_arg)) {
     if (!known.count(v)) {
-      std::fprintf(stderr, "mpc_success: unknown variant '%s' (known: ilqg, sampling, nosyn, pneumatic, pneumatic_open, as_planned)\n", v.c_str());
+      std::fprintf(stderr, "mpc_success: unknown variant '%s' (known: ilqg, sampling, nosyn, pneumatic, pneumatic_open, as_planned, nocomp)\n", v.c_str());
       return 2;
     }
     variants.push_back(known.at(v));
@@ -748,8 +798,8 @@ int main(int argc, char** argv) {
   traces_csv << "task,variant,t,error\n";
   std::printf("Behaviour MPC success, %d trial(s) per task, emulated real time on this machine (seed %u)\n\n", trials,
               seed);
-  std::printf("%-9s %-14s %9s %12s %12s %10s %9s\n", "task", "variant", "success", "mean error", "keys/min",
-              "plan ms", "diverged");
+  std::printf("%-9s %-14s %9s %12s %12s %10s %9s %12s\n", "task", "variant", "success", "mean error", "keys/min",
+              "plan ms", "diverged", "start [rad]");
   std::map<std::string, std::map<std::string, double>> rate, keys_rate, speed;
   for (const auto& task : tasks) {
     auto specs = makeTrials(task, trials, seed);
@@ -780,12 +830,13 @@ int main(int argc, char** argv) {
       runner.setFixedLatency(fixed_latency);
       runner.setSensed(sensed);
       if (feedback_scale >= 0) runner.setFeedbackScale(feedback_scale);
+      if (compensation != "task") runner.setCompensation(compensation == "on");
       runner.setPrintEvents(print_events);
       runner.setParams(params);
       runner.setPoolParams(pool_ilqg);
       int ok = 0, diverged = 0, keys_ok = 0, keys_all = 0;
       double error_sum = 0, typing_time = 0;
-      std::vector<double> plan_ms;
+      std::vector<double> plan_ms, start_errors;
       for (const auto& spec : specs) {
         runner.resetTrace();
         if (print_events && task == "type")
@@ -804,6 +855,7 @@ int main(int argc, char** argv) {
         keys_all += r.keys_total;
         typing_time += r.duration;
         plan_ms.push_back(r.plan_ms_median);
+        start_errors.push_back(r.start_error_median);
         trials_csv << task << "," << variant.name << "," << spec.index << "," << r.success << "," << r.final_error << ","
                    << (r.lowest_z > 1e8 ? 0 : r.lowest_z) << "," << r.farthest_from_grasp << "," << r.keys_correct << "," << r.keys_total << ","
                    << r.duration << "," << r.plan_ms_median << "," << r.diverged << "\n";
@@ -819,10 +871,10 @@ int main(int argc, char** argv) {
         keys_rate[task][variant.name] = keys_all ? static_cast<double>(keys_ok) / keys_all : 0;
         speed[task][variant.name] = typing_time > 0 ? 60.0 * keys_ok / typing_time : 0;
       }
-      std::printf("%-9s %-14s %5d/%-3zu %12.4f %12s %10.1f %9d\n", task.c_str(), variant.name.c_str(), ok, specs.size(),
-                  error_sum / specs.size(),
+      std::printf("%-9s %-14s %5d/%-3zu %12.4f %12s %10.1f %9d %12.3f\n", task.c_str(), variant.name.c_str(), ok,
+                  specs.size(), error_sum / specs.size(),
                   task == "type" ? std::to_string(static_cast<int>(std::lround(speed[task][variant.name]))).c_str() : "-",
-                  adroit::percentile(plan_ms, 50), diverged);
+                  adroit::percentile(plan_ms, 50), diverged, adroit::percentile(start_errors, 50));
       if (variant.pneumatic) {
         std::printf("%-9s %-14s pools: %.2f ms per 5 ms tick for %zu cylinders (median, one core)\n", "", "",
                     1e3 * runner.poolTickMedian(), runner.cylinders());
@@ -854,6 +906,8 @@ int main(int argc, char** argv) {
                 task.c_str());
     TrialRunner runner(task, known.at("ilqg"), overrides, contact_margin, contact_softness);
     runner.setParams(params);
+    if (compensation != "task") runner.setCompensation(compensation == "on");
+    if (feedback_scale >= 0) runner.setFeedbackScale(feedback_scale);
     for (const auto& value : sweep) {
       const double latency = std::atof(value.c_str());
       runner.setFixedLatency(latency);

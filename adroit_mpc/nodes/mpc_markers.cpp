@@ -171,6 +171,10 @@ void MpcNode::onDiagnostics(const ros::WallTimerEvent& event) {
   s.add("alpha", last.alpha);
   s.add("policy_age_mean_ms", w.age_samples > 0 ? 1e3 * w.age_sum / w.age_samples : 0.0);
   s.add("policy_age_max_ms", 1e3 * w.age_max);
+  // From a state's stamp to its plan's publication (robot clock), and how far ahead of the
+  // state the plans started (latency compensation; 0 when off).
+  s.add("plan_latency_ms", 1e3 * w.latency_sum / n);
+  s.add("latency_compensated_ms", 1e3 * w.compensated_sum / n);
   s.add("diverged", diverged);
   s.add("policies_published", policies_published_.load());
   s.add("commands_sent", commands_sent_.load());

@@ -69,7 +69,7 @@ MpcParams readParams(const ros::NodeHandle& pnh) {
                                  "iterations", "synergies", "derivative_skip", "samples", "noise_scale",
                                  "control_rate", "state_timeout", "feedback_scale", "marker_rate",
                                  "diagnostics_period", "nice", "control_priority", "lockstep", "physics_timestep", "lockstep_controls_per_plan",
-                                 "min_tension"};
+                                 "min_tension", "latency_compensation"};
   // dynamic_reconfigure keeps its values (task weights) among the private parameters too.
   for (const auto& d : adroit_mpc::MpcConfig::__getParamDescriptions__()) keys.insert(d->name);
   p.checkKeys("", keys);
@@ -107,6 +107,7 @@ MpcParams readParams(const ros::NodeHandle& pnh) {
   s.noise_scale = p.number("noise_scale", s.noise_scale, 0.0, 10.0);
   out.feedback_scale = p.number("feedback_scale", hint("feedback_scale", out.feedback_scale), 0.0, 1.0);
   s.feedback_scale = out.feedback_scale;
+  out.latency_compensation = p.boolean("latency_compensation", hint("latency_compensation", 0.0) > 0.5);
 
   out.control_rate = p.number("control_rate", out.control_rate, 1.0, 2000.0);
   out.state_timeout = p.number("state_timeout", out.state_timeout, 0.005, 10.0);

@@ -70,6 +70,8 @@ MpcNode::MpcNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   planner_state_.act = incoming_.act;
   observe_data_ = makeData(m);
   marker_data_ = makeData(m);
+  running_policy_.bind(m);
+  predictor_.initialize(m);
 
   std::string why;
   live_task_ = buildTask(params_.task, &why);
@@ -201,6 +203,12 @@ bool MpcNode::planOnce(const StateSnapshot& state) {
     planner_->setTask(*live_task_);
   }
   if (!events.empty()) publishEvents(events);
+  // Observed on the measured state above; planned from where the running policy will have
+  // taken the robot when this plan takes over (0 in lockstep: the world waits).
+  const double compensated = params_.latency_compensation && have_running_policy_
+                                 ? predictor_.predict(running_policy_, params_.feedback_scale, latency_.expected(),
+                                                      planner_state_)
+                                 : 0.0;
   planner_->setState(planner_state_);
 
   const adroit_mpc::OptimizeReport report = planner_->optimize();
@@ -224,6 +232,17 @@ bool MpcNode::planOnce(const StateSnapshot& state) {
   }
   planner_->policy(policies_.back());
   policies_.publish();
+  if (params_.latency_compensation) {  // a copy per plan (~0.5 MB for typing): only when used
+    planner_->policy(running_policy_);
+    have_running_policy_ = true;
+  }
+  const double latency = nodeTime(ros::Time::now()) - state.time;  // on the robot's clock
+  latency_.record(latency);
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    window_.latency_sum += latency;
+    window_.compensated_sum += compensated;
+  }
   policies_published_.fetch_add(1, std::memory_order_relaxed);
   if (markers_wanted_.load(std::memory_order_relaxed)) takeMarkerSnapshot();
   return true;

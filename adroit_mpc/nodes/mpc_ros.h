@@ -47,6 +47,7 @@
 #include "adroit_core/mujoco_model.h"
 #include "adroit_core/pi_mutex.h"
 #include "adroit_mpc/MpcConfig.h"
+#include "adroit_mpc/latency_compensation.h"
 #include "adroit_mpc/planner.h"
 #include "adroit_mpc/task.h"
 #include "adroit_ros/diagnostics.h"
@@ -68,6 +69,9 @@ struct MpcParams {
   double control_rate = 200;       // Hz
   double state_timeout = 0.1;      // s of wall time without a joint state: stop publishing
   double feedback_scale = 1.0;     // of the policy's gains at the control rate
+  // Plan from the state the running policy is predicted to reach when the new plan takes
+  // over (adroit_mpc/latency_compensation.h); default: the start task's hint.
+  bool latency_compensation = false;
   double marker_rate = 5;          // wall Hz, only while someone listens
   double diagnostics_period = 1.0;  // wall s
   // Nice value of the optimiser (the planner thread and its workers; the control loop runs
@@ -233,6 +237,12 @@ class MpcNode {
   StateSnapshot plan_state_;
   adroit_mpc::PlannerState planner_state_;
   PolicyExchange policies_;
+  // Latency compensation (planner thread): the policy the control side runs, the latency
+  // from a state's stamp to its plan's publication, the prediction.
+  adroit_mpc::PlanPolicy running_policy_;
+  bool have_running_policy_ = false;
+  adroit_mpc::LatencyEstimate latency_;
+  adroit_mpc::StatePredictor predictor_;
 
   // Control (control thread or lockstep loop).
   StateSnapshot control_state_;
@@ -257,6 +267,7 @@ class MpcNode {
     int solves = 0;
     double age_sum = 0, age_max = 0;
     int age_samples = 0;
+    double latency_sum = 0, compensated_sum = 0;  // state stamp to publication; predicted over
   };
   std::mutex stats_mutex_;
   Window window_;

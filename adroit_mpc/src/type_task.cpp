@@ -74,7 +74,8 @@ TaskParams TypeTask::defaults() {
                {"w_synergy", 0.08},      {"terminal_scale", 5.0},    {"hover_height", 0.015},
                {"approach_smoothing", 0.005}, {"key_period", 0.25}, {"min_lead", 1.0},
                {"step_smoothness", 0.03}, {"release_depth", 0.0035}, {"horizon", 0.2},
-               {"planner_dt", 0.01},      {"derivative_skip", 3},    {"feedback_scale", 0.5}};
+               {"planner_dt", 0.01},      {"derivative_skip", 3},    {"feedback_scale", 0.5},
+               {"latency_compensation", 1}};
   return p;
 }
 
@@ -99,6 +100,7 @@ TypeTask::TypeTask(const TaskParams& params) {
   planner_dt_hint_ = paramNumber(kTask, p, "planner_dt", 1e-4, 1);
   paramNumber(kTask, p, "derivative_skip", 1, 100);  // planner hints, read by their users
   paramNumber(kTask, p, "feedback_scale", 0, 1);
+  paramNumber(kTask, p, "latency_compensation", 0, 1);
   paramString(kTask, p, "scene");
   assignment_keyframe_ = paramString(kTask, p, "assignment_keyframe");
   assignment_overrides_ = parseAssignment(paramString(kTask, p, "finger_assignment"));

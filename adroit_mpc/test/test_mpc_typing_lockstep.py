@@ -8,6 +8,7 @@ import unittest
 
 import rospy
 import rostest
+from diagnostic_msgs.msg import DiagnosticArray
 from std_msgs.msg import String
 
 
@@ -27,6 +28,16 @@ class MpcTypingLockstepTest(unittest.TestCase):
             with lock:
                 events.append(msg.data)
 
+        compensated = []  # latency_compensated_ms of the node's diagnostics
+
+        def on_diagnostics(msg):
+            for status in msg.status:
+                values = {kv.key: kv.value for kv in status.values}
+                if status.name == "adroit_mpc" and "latency_compensated_ms" in values:
+                    with lock:
+                        compensated.append(float(values["latency_compensated_ms"]))
+
+        rospy.Subscriber("/adroit/diagnostics", DiagnosticArray, on_diagnostics, queue_size=50)
         rospy.Subscriber("/adroit/mpc/typed", String, on_typed, queue_size=100)
         rospy.Subscriber("/adroit/mpc/events", String, on_event, queue_size=100)
         pub = rospy.Publisher("/adroit/mpc/type", String, queue_size=1, latch=True)
@@ -59,6 +70,12 @@ class MpcTypingLockstepTest(unittest.TestCase):
             else:
                 text.append(key)
         self.assertEqual(text, list(sequence), "typed %s" % got)
+        # Typing compensates its planning latency (config/tasks/type.yaml), but in lockstep the
+        # world waits for the plan: every plan starts from the measured state, none in a future
+        # that never comes.
+        with lock:
+            self.assertTrue(compensated, "no latency_compensated_ms in the node's diagnostics")
+            self.assertEqual(max(compensated), 0.0, compensated)
 
 
 if __name__ == "__main__":

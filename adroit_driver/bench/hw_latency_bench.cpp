@@ -24,7 +24,8 @@
 // boards apply, read with +-1 kPa noise. Paired blocks alternate, the driver staying up:
 //   relay  (baseline) a roscpp subscriber here publishes 0 V (plus the tag) for every cylinder on each
 //          actuator state: the driver's path and one ROS hop each way, nothing computed;
-//   pools  the six iLQG pools (pools.launch tick_on_state:=true start_manager:=true, started here for the block) command the
+//   pools  the six iLQG pools (pools.launch tick_on_state:=true start_manager:=true solve_every:=2, as hardware.launch;
+//          started here for the block) command the
 //          valves; this program feeds them a force reference at 100 Hz, as the behaviour MPC would.
 // Transitions overlap (the next commander runs before the previous one stops), so the driver's 50 ms
 // command watchdog never sees a gap; should the driver be in its safe state anyway, the block starts with
@@ -904,6 +905,8 @@ class Bench {
       // As hardware.launch runs them: nodelets of one manager, so a state reaches all six through
       // one connection and one deserialisation (p99 2.2 -> 1.8 ms per group measured here).
       if (args.find("start_manager=") == std::string::npos) words.push_back("start_manager:=true");
+      // hardware.launch's re-solve at every second sample (pool_solve_every); solve_every=1 re-solves at each.
+      if (args.find("solve_every=") == std::string::npos) words.push_back("solve_every:=2");
     }
     std::vector<char*> argv;
     for (auto& w : words) argv.push_back(w.data());

@@ -1,6 +1,7 @@
 #include "adroit_mpc/planning_model.h"
 
 #include <algorithm>
+#include <cstdio>
 #include <cstdlib>
 #include <cmath>
 #include <fstream>
@@ -16,7 +17,100 @@ void setSoftness(mjtNum* solref, mjtNum* solimp, double softness, double timeste
   if (solref[0] > 0) solref[0] = std::max(solref[0], 2 * timestep);  // standard (stiffness) form
 }
 
+std::string readFile(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw adroit::ModelLoadError("cannot read model file " + path);
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// A pair's attributes as MuJoCo 2.2.2 mixes them for a dynamic contact of geoms a and b
+// (mj_contactParam, margin and gap of mj_collideGeoms).
+std::string mixedPairElement(const mjModel* m, int a, int b) {
+  int condim;
+  mjtNum friction[3], solref[mjNREF], solimp[mjNIMP];
+  const int pa = m->geom_priority[a], pb = m->geom_priority[b];
+  if (pa != pb) {
+    const int g = pa > pb ? a : b;
+    condim = m->geom_condim[g];
+    mju_copy(friction, m->geom_friction + 3 * g, 3);
+    mju_copy(solref, m->geom_solref + mjNREF * g, mjNREF);
+    mju_copy(solimp, m->geom_solimp + mjNIMP * g, mjNIMP);
+  } else {
+    condim = std::max(m->geom_condim[a], m->geom_condim[b]);
+    for (int k = 0; k < 3; ++k) friction[k] = std::max(m->geom_friction[3 * a + k], m->geom_friction[3 * b + k]);
+    const mjtNum sa = m->geom_solmix[a], sb = m->geom_solmix[b];
+    mjtNum mix = 0.5;
+    if (sa >= mjMINVAL && sb >= mjMINVAL) mix = sa / (sa + sb);
+    else if (sa < mjMINVAL && sb >= mjMINVAL) mix = 0;
+    else if (sa >= mjMINVAL && sb < mjMINVAL) mix = 1;
+    const mjtNum* ra = m->geom_solref + mjNREF * a;
+    const mjtNum* rb = m->geom_solref + mjNREF * b;
+    for (int k = 0; k < mjNREF; ++k)  // both in standard form: mixed; else the smaller, element-wise
+      solref[k] = ra[0] > 0 && rb[0] > 0 ? mix * ra[k] + (1 - mix) * rb[k] : std::min(ra[k], rb[k]);
+    for (int k = 0; k < mjNIMP; ++k)
+      solimp[k] = mix * m->geom_solimp[mjNIMP * a + k] + (1 - mix) * m->geom_solimp[mjNIMP * b + k];
+  }
+  const auto list = [](const mjtNum* v, int n) {
+    std::string out;
+    char number[32];
+    for (int k = 0; k < n; ++k) {
+      std::snprintf(number, sizeof number, "%.17g", v[k]);
+      out += (k ? " " : "") + std::string(number);
+    }
+    return out;
+  };
+  const mjtNum friction5[5] = {friction[0], friction[0], friction[1], friction[2], friction[2]};
+  const mjtNum margin = std::max(m->geom_margin[a], m->geom_margin[b]);
+  const mjtNum gap = std::max(m->geom_gap[a], m->geom_gap[b]);
+  return std::string("    <pair geom1=\"") + mj_id2name(m, mjOBJ_GEOM, a) + "\" geom2=\"" + mj_id2name(m, mjOBJ_GEOM, b) +
+         "\" condim=\"" + std::to_string(condim) + "\" friction=\"" + list(friction5, 5) + "\" solref=\"" +
+         list(solref, mjNREF) + "\" solimp=\"" + list(solimp, mjNIMP) + "\" margin=\"" + list(&margin, 1) +
+         "\" gap=\"" + list(&gap, 1) + "\"/>\n";
+}
+
+bool contains(const int* values, int n, int value) { return std::find(values, values + n, value) != values + n; }
+
 }  // namespace
+
+std::string explicitContactPairsXml(const std::string& xml, const mjModel* m, int* pairs) {
+  std::string elements;
+  int count = 0;
+  const bool filter_parent = !(m->opt.disableflags & mjDSBL_FILTERPARENT);
+  for (int a = 0; a < m->ngeom; ++a) {
+    for (int b = a + 1; b < m->ngeom; ++b) {
+      if (!((m->geom_contype[a] & m->geom_conaffinity[b]) || (m->geom_contype[b] & m->geom_conaffinity[a]))) continue;
+      const int body_a = m->geom_bodyid[a], body_b = m->geom_bodyid[b];
+      const int weld_a = m->body_weldid[body_a], weld_b = m->body_weldid[body_b];
+      if (weld_a == weld_b) continue;
+      // The parent filter spares the world: a body on the world still touches the floor.
+      const int weld_parent_a = m->body_weldid[m->body_parentid[weld_a]];
+      const int weld_parent_b = m->body_weldid[m->body_parentid[weld_b]];
+      if (filter_parent && weld_a != 0 && weld_b != 0 && (weld_a == weld_parent_b || weld_b == weld_parent_a)) continue;
+      // Excluded body pairs, and body pairs that already have an explicit pair (MuJoCo skips
+      // their dynamic collisions), by MuJoCo's signature of a body pair (ids + 1, as 2.2.2
+      // writes pair_signature).
+      const int signature = ((std::min(body_a, body_b) + 1) << 16) + std::max(body_a, body_b) + 1;
+      if (contains(m->exclude_signature, m->nexclude, signature) || contains(m->pair_signature, m->npair, signature))
+        continue;
+      if (!mj_id2name(m, mjOBJ_GEOM, a) || !mj_id2name(m, mjOBJ_GEOM, b)) return "";
+      elements += mixedPairElement(m, a, b);
+      ++count;
+    }
+  }
+  if (pairs) *pairs = count;
+  std::string out = xml;
+  const std::size_t contact_end = out.rfind("</contact>");
+  if (contact_end != std::string::npos) {
+    out.insert(contact_end, elements);
+  } else {
+    const std::size_t end = out.rfind("</mujoco>");
+    if (end == std::string::npos) throw std::invalid_argument("explicitContactPairsXml: no </mujoco> in the model text");
+    out.insert(end, "  <contact>\n" + elements + "  </contact>\n");
+  }
+  return out;
+}
 
 void applyPlanningSettings(mjModel* m, const PlanningModelSettings& s) {
   if (!(s.timestep > 0) || !std::isfinite(s.timestep))
@@ -88,7 +182,15 @@ void applyPlanningSettings(mjModel* m, const PlanningModelSettings& s) {
 adroit::ModelPtr loadPlanningModel(const std::string& path, const PlanningModelSettings& settings) {
   adroit::LoadedModel loaded = adroit::loadModelFile(path);
   applyPlanningSettings(loaded.model.get(), settings);
-  return std::move(loaded.model);
+  if (!settings.explicit_pairs || loaded.model->opt.collision != mjCOL_ALL) return std::move(loaded.model);
+  // The pairs take their parameters from the geoms as the settings left them (margin,
+  // softness), and the settings then give the new pairs what they give every pair.
+  const std::string xml = explicitContactPairsXml(readFile(path), loaded.model.get());
+  if (xml.empty()) return std::move(loaded.model);  // an unnamed geom: dynamic collisions as they are
+  adroit::LoadedModel paired = adroit::loadModelString(xml);
+  applyPlanningSettings(paired.model.get(), settings);
+  paired.model->opt.collision = mjCOL_PAIR;
+  return std::move(paired.model);
 }
 
 std::string unprunedXml(const std::string& xml) {
@@ -106,11 +208,7 @@ std::string unprunedXml(const std::string& xml) {
 }
 
 adroit::ModelPtr loadUnprunedPlanningModel(const std::string& path, const PlanningModelSettings& settings) {
-  std::ifstream in(path);
-  if (!in) throw adroit::ModelLoadError("cannot read model file " + path);
-  std::stringstream text;
-  text << in.rdbuf();
-  adroit::LoadedModel loaded = adroit::loadModelString(unprunedXml(text.str()));
+  adroit::LoadedModel loaded = adroit::loadModelString(unprunedXml(readFile(path)));
   applyPlanningSettings(loaded.model.get(), settings);
   return std::move(loaded.model);
 }

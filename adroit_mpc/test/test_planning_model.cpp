@@ -4,6 +4,12 @@
 #include <adroit_mpc/planning_model.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <functional>
+#include <string>
+#include <tuple>
+#include <vector>
+
 using namespace adroit_mpc;
 
 namespace {
@@ -35,6 +41,7 @@ TEST(PlanningModel, SettingsAreApplied) {
   s.contact_margin = 0.01;
   s.contact_softness = 0.005;
   s.solver_iterations = 7;
+  s.explicit_pairs = false;  // the description's 18 pairs alone (ExplicitPairs... below)
   auto m = loadPlanningModel(bottleFile(), s);
   EXPECT_EQ(m->opt.timestep, 0.005);
   EXPECT_EQ(m->opt.iterations, 7);
@@ -136,4 +143,140 @@ TEST(PlanningModel, UnprunedVariantHasMoreContactsOnceTheBottleLanded) {
   const double after = meanContactsAfterLanding(pruned.get(), 0.8, 0.2);
   EXPECT_GT(after, 0.0);  // the bottle rests on the hand
   EXPECT_GT(before, after + 1.0);
+}
+
+namespace {
+
+struct ContactKey {
+  int geom_low, geom_high, dim;
+  double dist, friction, solref, solimp, margin;
+};
+
+// The contacts of the last collision pass, each by its geoms (in either order) and the
+// parameters MuJoCo gave it, sorted so two passes compare regardless of their order.
+std::vector<ContactKey> contacts(const mjData* d) {
+  std::vector<ContactKey> out;
+  for (int c = 0; c < d->ncon; ++c) {
+    const mjContact& k = d->contact[c];
+    out.push_back({std::min(k.geom1, k.geom2), std::max(k.geom1, k.geom2), k.dim, k.dist, k.friction[0],
+                   k.solref[0], k.solimp[2], k.includemargin});
+  }
+  std::sort(out.begin(), out.end(), [](const ContactKey& a, const ContactKey& b) {
+    return std::tie(a.geom_low, a.geom_high, a.dist) < std::tie(b.geom_low, b.geom_high, b.dist);
+  });
+  return out;
+}
+
+// The same rollout on both models (ctrl from `control(t, ctrl)`): every step's contacts are the
+// same ones with the same parameters, and the trajectories agree. Returns the contacts seen.
+int expectSameRollout(const mjModel* dynamic, const mjModel* paired, const char* key, double seconds,
+                      const std::function<void(double, mjtNum*)>& control) {
+  adroit::DataPtr a = adroit::makeData(dynamic), b = adroit::makeData(paired);
+  const int k = mj_name2id(dynamic, mjOBJ_KEY, key);
+  EXPECT_GE(k, 0);
+  mj_resetDataKeyframe(dynamic, a.get(), k);
+  mj_resetDataKeyframe(paired, b.get(), k);
+  int seen = 0;
+  while (a->time < seconds) {
+    control(a->time, a->ctrl);
+    mju_copy(b->ctrl, a->ctrl, dynamic->nu);
+    mj_step(dynamic, a.get());
+    mj_step(paired, b.get());
+    const auto ca = contacts(a.get()), cb = contacts(b.get());
+    EXPECT_EQ(ca.size(), cb.size()) << "at t " << a->time;
+    if (ca.size() != cb.size()) return seen;
+    for (std::size_t c = 0; c < ca.size(); ++c) {
+      EXPECT_EQ(ca[c].geom_low, cb[c].geom_low);
+      EXPECT_EQ(ca[c].geom_high, cb[c].geom_high);
+      EXPECT_EQ(ca[c].dim, cb[c].dim);
+      EXPECT_NEAR(ca[c].dist, cb[c].dist, 1e-9);
+      EXPECT_DOUBLE_EQ(ca[c].friction, cb[c].friction);
+      EXPECT_DOUBLE_EQ(ca[c].solref, cb[c].solref);
+      EXPECT_DOUBLE_EQ(ca[c].solimp, cb[c].solimp);
+      EXPECT_DOUBLE_EQ(ca[c].margin, cb[c].margin);
+    }
+    seen += static_cast<int>(ca.size());
+    for (int i = 0; i < dynamic->nq; ++i) EXPECT_NEAR(a->qpos[i], b->qpos[i], 1e-7) << "qpos " << i << " at t " << a->time;
+  }
+  return seen;
+}
+
+}  // namespace
+
+TEST(PlanningModel, ExplicitPairsCollideAsTheDynamicFilterDoes) {
+  // Typing's contact settings on the keypad: the first finger curls onto its keys, the thumb
+  // towards the fingers, the palm is pressed down into the keypad.
+  PlanningModelSettings s;
+  s.timestep = 0.01;
+  s.contact_margin = s.contact_softness = 0.001;
+  s.explicit_pairs = false;
+  const std::string keypad = adroit::description::sceneFile(descriptionShareDir(), "keypad", true);
+  auto dynamic = loadPlanningModel(keypad, s);
+  s.explicit_pairs = true;
+  auto paired = loadPlanningModel(keypad, s);
+  EXPECT_EQ(dynamic->opt.collision, mjCOL_ALL);
+  EXPECT_EQ(paired->opt.collision, mjCOL_PAIR);
+  EXPECT_GT(paired->npair, dynamic->npair);
+  const auto flexing = [&](double t, mjtNum* ctrl) {
+    for (int a = 0; a < dynamic->nu; ++a) {
+      const std::string name = mj_id2name(dynamic.get(), mjOBJ_ACTUATOR, a);
+      const bool flex = name.find("_flex") != std::string::npos;
+      const bool pushes = name.find("FF") != std::string::npos || name.find("TH") != std::string::npos ||
+                          name.find("WRJ1") != std::string::npos;
+      ctrl[a] = flex && pushes ? std::min(40.0, 200 * t) : 0.3;
+    }
+  };
+  EXPECT_GT(expectSameRollout(dynamic.get(), paired.get(), "rest", 1.0, flexing), 20);
+
+  // The bottle falling into the hand with the object tasks' settings.
+  s = PlanningModelSettings{};
+  s.timestep = 0.02;
+  s.explicit_pairs = false;
+  auto bottle_dynamic = loadPlanningModel(bottleFile(), s);
+  s.explicit_pairs = true;
+  auto bottle_paired = loadPlanningModel(bottleFile(), s);
+  EXPECT_GT(expectSameRollout(bottle_dynamic.get(), bottle_paired.get(), "rest", 1.0,
+                              [&](double, mjtNum* ctrl) { std::fill(ctrl, ctrl + bottle_dynamic->nu, 0.3); }),
+            20);
+}
+
+TEST(PlanningModel, ExplicitPairsKeepExcludesAndTheWorld) {
+  // Three balls dropped onto a floor, two of them overlapping from the start: an <exclude> keeps
+  // that pair apart, the third touches both; a pendulum on the world lies on the floor too
+  // (the parent filter spares the world). Same contacts both ways.
+  const std::string xml = R"(
+<mujoco><option timestep="0.005"/>
+  <worldbody>
+    <geom name="floor" type="plane" size="1 1 0.1"/>
+    <body name="a" pos="0 0 0.1"><freejoint/><geom name="ga" size="0.05"/></body>
+    <body name="b" pos="0.06 0 0.1"><freejoint/><geom name="gb" size="0.05"/></body>
+    <body name="c" pos="0.03 0 0.25"><freejoint/><geom name="gc" size="0.05"/></body>
+    <body name="arm" pos="0.4 0 0.05"><joint type="hinge" axis="0 1 0"/><geom name="rod" type="capsule" fromto="0 0 0 0.1 0 0" size="0.02"/></body>
+  </worldbody>
+  <contact><exclude body1="a" body2="b"/></contact>
+</mujoco>)";
+  adroit::LoadedModel dynamic = adroit::loadModelString(xml);
+  int pairs = 0;
+  adroit::LoadedModel paired = adroit::loadModelString(explicitContactPairsXml(xml, dynamic.model.get(), &pairs));
+  paired.model->opt.collision = mjCOL_PAIR;
+  // floor-a, floor-b, floor-c, floor-rod, a-c, b-c, a-rod, b-rod, c-rod; not a-b.
+  EXPECT_EQ(pairs, 9);
+  adroit::DataPtr a = adroit::makeData(dynamic.model.get()), b = adroit::makeData(paired.model.get());
+  int seen = 0;
+  for (int step = 0; step < 200; ++step) {
+    mj_step(dynamic.model.get(), a.get());
+    mj_step(paired.model.get(), b.get());
+    const auto ca = contacts(a.get()), cb = contacts(b.get());
+    ASSERT_EQ(ca.size(), cb.size()) << "step " << step;
+    for (std::size_t c = 0; c < ca.size(); ++c) {
+      EXPECT_EQ(ca[c].geom_low, cb[c].geom_low);
+      EXPECT_EQ(ca[c].geom_high, cb[c].geom_high);
+    }
+    seen += static_cast<int>(ca.size());
+  }
+  EXPECT_GT(seen, 200);
+  // A model whose colliding geoms are not all named cannot be written as pairs.
+  const std::string unnamed = R"(<mujoco><worldbody><geom type="plane" size="1 1 0.1"/>
+    <body pos="0 0 0.1"><freejoint/><geom size="0.05"/></body></worldbody></mujoco>)";
+  EXPECT_EQ(explicitContactPairsXml(unnamed, adroit::loadModelString(unnamed).model.get()), "");
 }

@@ -115,8 +115,18 @@ void FdDerivatives::initialize(const mjModel* m, int horizon, int workers, const
   if (couple_all)
     for (int i = 1; i < m->nv; ++i) unite(g, dof_tree_[0], dof_tree_[i]);
 
+  pair_of_geoms_.clear();
+  if (m->opt.collision == mjCOL_PAIR) {
+    for (int p = 0; p < m->npair; ++p) {
+      const long low = std::min(m->pair_geom1[p], m->pair_geom2[p]), high = std::max(m->pair_geom1[p], m->pair_geom2[p]);
+      pair_of_geoms_.emplace_back(low * m->ngeom + high, p);
+    }
+    std::sort(pair_of_geoms_.begin(), pair_of_geoms_.end());
+  }
+
   data_.clear();
-  scratch_.assign(workers, Scratch{});
+  scratch_.clear();
+  scratch_.resize(workers);
   const int n_state = m->nq + m->nv + m->na;
   for (int w = 0; w < workers; ++w) {
     data_.push_back(adroit::makeData(m));
@@ -135,6 +145,10 @@ void FdDerivatives::initialize(const mjModel* m, int horizon, int workers, const
     s.slot.resize(m->nv);
     s.count.resize(m->nbody);
     s.representative.resize(m->nv);
+    if (!pair_of_geoms_.empty()) {
+      s.active_pairs.reserve(m->npair);
+      s.nudge_model = adroit::copyModel(m);
+    }
   }
 }
 
@@ -158,8 +172,7 @@ void FdDerivatives::restore(mjData* d, const Scratch& s) const {
   d->time = s.time;
 }
 
-void FdDerivatives::stepSkip(mjData* d, int skipstage, std::vector<mjtNum>& out) const {
-  const mjModel* m = model_;
+void FdDerivatives::stepSkip(const mjModel* m, mjData* d, int skipstage, std::vector<mjtNum>& out) const {
   mj_forwardSkip(m, d, skipstage, 1);
   integrateAfterForward(m, d);
   mju_copy(out.data(), d->qpos, m->nq);
@@ -170,8 +183,39 @@ void FdDerivatives::stepSkip(mjData* d, int skipstage, std::vector<mjtNum>& out)
 void FdDerivatives::nudgedStep(mjData* d, const Scratch& s, mjtNum* input, double by, int skipstage,
                                std::vector<mjtNum>& out) const {
   *input += by;
-  stepSkip(d, skipstage, out);
+  stepSkip(model_, d, skipstage, out);
   restore(d, s);  // the input too
+}
+
+const mjModel* FdDerivatives::restrictPairs(const mjData* d, Scratch& s) const {
+  if (!s.nudge_model) return model_;
+  const mjModel* m = model_;
+  s.active_pairs.clear();
+  for (int c = 0; c < d->ncon; ++c) {
+    const long g1 = d->contact[c].geom1, g2 = d->contact[c].geom2;
+    const long key = std::min(g1, g2) * m->ngeom + std::max(g1, g2);
+    const auto found = std::lower_bound(pair_of_geoms_.begin(), pair_of_geoms_.end(), std::make_pair(key, -1));
+    if (found == pair_of_geoms_.end() || found->first != key) return model_;  // not a pair's contact: test them all
+    // A pair's contacts are consecutive: each pair once, at most npair (reserved).
+    if (s.active_pairs.empty() || s.active_pairs.back() != found->second) s.active_pairs.push_back(found->second);
+  }
+  // In the model's order (so the contacts keep theirs).
+  std::sort(s.active_pairs.begin(), s.active_pairs.end());
+  mjModel* n = s.nudge_model.get();
+  for (std::size_t k = 0; k < s.active_pairs.size(); ++k) {
+    const int p = s.active_pairs[k];
+    n->pair_dim[k] = m->pair_dim[p];
+    n->pair_geom1[k] = m->pair_geom1[p];
+    n->pair_geom2[k] = m->pair_geom2[p];
+    n->pair_signature[k] = m->pair_signature[p];
+    mju_copy(n->pair_solref + mjNREF * k, m->pair_solref + mjNREF * p, mjNREF);
+    mju_copy(n->pair_solimp + mjNIMP * k, m->pair_solimp + mjNIMP * p, mjNIMP);
+    n->pair_margin[k] = m->pair_margin[p];
+    n->pair_gap[k] = m->pair_gap[p];
+    mju_copy(n->pair_friction + 5 * k, m->pair_friction + 5 * p, 5);
+  }
+  n->npair = static_cast<int>(s.active_pairs.size());
+  return n;
 }
 
 int FdDerivatives::groupDofs(const mjData* d, Scratch& s) const {
@@ -203,8 +247,16 @@ int FdDerivatives::knot(mjData* d, std::size_t worker, Eigen::MatrixXd& A, Eigen
   const bool centered = settings_.centered;
   const int nv = m->nv, na = m->na;
   save(d, s);
-  stepSkip(d, mjSTAGE_NONE, s.next);
+  stepSkip(m, d, mjSTAGE_NONE, s.next);
   const int columns = groupDofs(d, s);  // from the nominal step's contacts
+  const mjModel* position_model = restrictPairs(d, s);
+  if (settings_.warmstart_from_nominal && d->nefc > 0) {
+    // The nominal step's solution (qacc: the integrator leaves it); the nominal again from
+    // there, so that it and every nudge are solved from the same start.
+    mju_copy(s.warmstart.data(), d->qacc, nv);
+    restore(d, s);
+    stepSkip(m, d, mjSTAGE_NONE, s.next);
+  }
   restore(d, s);
 
   // Controls (skip the position and velocity stages); a control at its range's end is
@@ -244,7 +296,7 @@ int FdDerivatives::knot(mjData* d, std::size_t worker, Eigen::MatrixXd& A, Eigen
           for (int i = 0; i < nv; ++i)
             if (s.slot[i] == j) d->qvel[i] += sign * eps;
         }
-        stepSkip(d, position ? mjSTAGE_NONE : mjSTAGE_POS, sign > 0 ? s.plus : s.minus);
+        stepSkip(position ? position_model : m, d, position ? mjSTAGE_NONE : mjSTAGE_POS, sign > 0 ? s.plus : s.minus);
         restore(d, s);
       }
       difference(centered ? s.minus : s.next, s.plus, centered ? 2 * eps : eps, s);

@@ -30,7 +30,8 @@ void IlqgPlanner::initialize(const mjModel* m, const Task& task, const PlannerSe
   state_.act.assign(m->na, 0.0);
   initial_.resize(m->nq + m->nv + m->na);
 
-  fd_.initialize(m, knots_, workers, FdSettings{settings.fd_epsilon, settings.fd_centered, settings.derivative_skip});
+  fd_.initialize(m, knots_, workers, FdSettings{settings.fd_epsilon, settings.fd_centered, settings.derivative_skip, true,
+                                                   settings.fd_warmstart});
   B_act_.assign(knots_, Eigen::MatrixXd::Zero(nx_, m->nu));
   lq_.resize(nx_, nu, knots_);
   backward_ = std::make_unique<adroit::BackwardPass>(nx_, nu, knots_);

@@ -2,12 +2,16 @@
 // the derivative_skip hold.
 #include <adroit_core/mujoco_model.h>
 #include <adroit_core/thread_pool.h>
+#include <adroit_description/scenes.h>
 #include <adroit_mpc/fd_derivatives.h>
+#include <adroit_mpc/planning_model.h>
 #include <gtest/gtest.h>
 
 #include <string>
+#include <utility>
 
 using namespace adroit_mpc;
+using adroit::description::sceneFile;
 
 namespace {
 
@@ -151,17 +155,20 @@ TEST(FdDerivatives, SeparatedTreesShareNudgedColumnsAndMatchOneColumnPerDof) {
       Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> A_ref(nx, nx), B_ref(nx, m->nu);
       adroit::DataPtr ref = adroit::copyData(m.get(), d.get());
       mjd_transitionFD(m.get(), ref.get(), 1e-6, centered, A_ref.data(), B_ref.data(), nullptr, nullptr);
-      for (const bool group : {false, true}) {
+      for (const auto& [group, warm] : {std::pair{false, false}, std::pair{false, true}, std::pair{true, false},
+                                        std::pair{true, true}}) {
         FdDerivatives fd;
-        fd.initialize(m.get(), 1, 1, FdSettings{1e-6, centered, 1, group});
+        fd.initialize(m.get(), 1, 1, FdSettings{1e-6, centered, 1, group, warm});
         Eigen::MatrixXd A(nx, nx), B(nx, m->nu);
         adroit::DataPtr work = adroit::copyData(m.get(), d.get());
         const int columns = fd.knot(work.get(), 0, A, B);
         // Trees: {a1 a2, c} by the tendon (+ d when it rests on the tip), {b}, {d}.
         EXPECT_EQ(columns, group ? (touching ? 4 : 3) : 5) << "gap " << gap;
-        const double tolerance = group ? 1e-7 : 1e-12;  // grouped: the nudges share one solver run
+        // Grouped: the nudges share one solver run. Warm started from the nominal's solution: the
+        // same derivatives to the solver's precision (mjd_transitionFD starts from the knot's).
+        const double tolerance = group ? 1e-7 : warm ? 1e-8 : 1e-12;
         EXPECT_LT((A - Eigen::MatrixXd(A_ref)).cwiseAbs().maxCoeff(), tolerance * (1 + A_ref.cwiseAbs().maxCoeff()))
-            << "gap " << gap << " centered " << centered << " grouped " << group;
+            << "gap " << gap << " centered " << centered << " grouped " << group << " warm " << warm;
         EXPECT_LT((B - Eigen::MatrixXd(B_ref)).cwiseAbs().maxCoeff(), tolerance * (1 + B_ref.cwiseAbs().maxCoeff()));
         if (!group) continue;
         // Separated trees: exact zeros between b and the others (and d while it is in the air).
@@ -186,4 +193,48 @@ TEST(FdDerivatives, BadSettingsAreRejected) {
   EXPECT_THROW(fd.initialize(m.get(), 5, 1, FdSettings{0.0, false, 1}), std::invalid_argument);
   EXPECT_THROW(fd.initialize(m.get(), 5, 1, FdSettings{1e-6, false, 0}), std::invalid_argument);
   EXPECT_THROW(fd.initialize(m.get(), 0, 1, FdSettings{1e-6, false, 1}), std::invalid_argument);
+}
+
+TEST(FdDerivatives, PositionNudgesTestOnlyThePairsInContactAndAgreeWithTheFullPass) {
+  // The keypad's planning model with typing's contact settings collides through explicit pairs
+  // only; the first finger pressed onto its key and the palm down onto the keypad give the
+  // knot contacts. The same model testing every pair in every nudge (mjCOL_ALL: the explicit
+  // pairs cover every colliding body pair, so the dynamic pass adds nothing) is the reference.
+  PlanningModelSettings s;
+  s.timestep = 0.01;
+  s.contact_margin = s.contact_softness = 0.001;
+  auto restricted = loadPlanningModel(sceneFile(descriptionShareDir(), "keypad", true), s);
+  ASSERT_EQ(restricted->opt.collision, mjCOL_PAIR);
+  adroit::ModelPtr full = adroit::copyModel(restricted.get());
+  full->opt.collision = mjCOL_ALL;
+
+  const mjModel* m = restricted.get();
+  adroit::DataPtr d = adroit::makeData(m);
+  mj_resetDataKeyframe(m, d.get(), mj_name2id(m, mjOBJ_KEY, "rest"));
+  for (int a = 0; a < m->nu; ++a) {
+    const std::string name = mj_id2name(m, mjOBJ_ACTUATOR, a);
+    d->ctrl[a] = name.find("_flex") != std::string::npos &&
+                         (name.find("FF") != std::string::npos || name.find("WRJ1") != std::string::npos)
+                     ? 30.0
+                     : m->actuator_ctrlrange[2 * a];
+  }
+  while (d->time < 0.3) mj_step(m, d.get());
+  mj_forward(m, d.get());
+  ASSERT_GE(d->ncon, 2) << "the pressed finger and palm should touch";
+  ASSERT_LT(d->ncon, m->npair);
+
+  const int nx = 2 * m->nv + m->na;
+  Eigen::MatrixXd A_restricted(nx, nx), B_restricted(nx, m->nu), A_full(nx, nx), B_full(nx, m->nu);
+  FdDerivatives fd_restricted, fd_full;
+  fd_restricted.initialize(m, 1, 1, FdSettings{});
+  fd_full.initialize(full.get(), 1, 1, FdSettings{});
+  adroit::DataPtr work = adroit::copyData(m, d.get());
+  fd_restricted.knot(work.get(), 0, A_restricted, B_restricted);
+  mj_copyData(work.get(), m, d.get());
+  fd_full.knot(work.get(), 0, A_full, B_full);
+  // The contacts move the position columns (the pressed key's and the finger's) ...
+  EXPECT_GT(A_full.cwiseAbs().maxCoeff(), 1.0);
+  // ... and both passes see the same contacts in the same order.
+  EXPECT_LT((A_restricted - A_full).cwiseAbs().maxCoeff(), 1e-9);
+  EXPECT_LT((B_restricted - B_full).cwiseAbs().maxCoeff(), 1e-9);
 }

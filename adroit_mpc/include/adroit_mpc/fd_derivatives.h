@@ -13,6 +13,11 @@
 // touches them; a falling object costs none beside the hand's. The columns between
 // separated trees are exactly zero instead of rounding noise.
 //
+// On a model that collides through explicit pairs only (mjCOL_PAIR, planning_model.h), the
+// position nudges test only the pairs in contact at the knot's nominal step: a nudge of 1e-6
+// moves no geom into or out of a margin that it was not already at, and the contacts keep
+// their order, so the columns are those of the full pass (to rounding) without its cost.
+//
 // Knots are spread over the thread pool, one mjData per worker (allocated in initialize()).
 // derivative_skip k > 1 computes the derivatives at knots 0, k, 2k, ... only and holds each
 // for the next k - 1 knots: a zero-order-hold approximation of the linearisation that is good
@@ -27,6 +32,7 @@
 #include <mujoco/mujoco.h>
 
 #include <Eigen/Dense>
+#include <utility>
 #include <vector>
 
 namespace adroit_mpc {
@@ -36,6 +42,11 @@ struct FdSettings {
   bool centered = false;     // centred differences: twice the steps, second-order accurate
   int skip = 1;              // derivative_skip
   bool group_trees = true;   // nudge separated trees together (false: one column per DOF)
+  // Every nudge (and the nominal step again) starts the constraint solver from the nominal
+  // step's solution instead of the knot's warm start: MuJoCo's Newton solver then converges
+  // in an iteration or so instead of walking the contacts' active set from the unconstrained
+  // acceleration each time. false: mjd_transitionFD's warm start (the knot's).
+  bool warmstart_from_nominal = true;
 };
 
 class FdDerivatives {
@@ -71,11 +82,15 @@ class FdDerivatives {
     std::vector<int> count;                                // representative -> DOFs so far
     std::vector<int> slot;                                 // dof -> its column within the group
     std::vector<int> representative;                       // dof -> its group
+    std::vector<int> active_pairs;                         // pair ids in contact at the nominal
+    adroit::ModelPtr nudge_model;                          // the model, those pairs only (mjCOL_PAIR)
     double time = 0;
   };
   void save(const mjData* d, Scratch& s) const;
   void restore(mjData* d, const Scratch& s) const;
-  void stepSkip(mjData* d, int skipstage, std::vector<mjtNum>& out) const;
+  void stepSkip(const mjModel* m, mjData* d, int skipstage, std::vector<mjtNum>& out) const;
+  // The worker's model for position nudges: the pairs of the nominal step's contacts only.
+  const mjModel* restrictPairs(const mjData* d, Scratch& s) const;
   // One input of `d` (a ctrl or act entry) moved by `by`, stepped into `out`, then restored.
   void nudgedStep(mjData* d, const Scratch& s, mjtNum* input, double by, int skipstage,
                   std::vector<mjtNum>& out) const;
@@ -91,6 +106,7 @@ class FdDerivatives {
   std::vector<int> static_group_;  // tree -> representative after tendons, actuators, equalities
   std::vector<int> body_tree_;     // body -> its tree (top moving body; 0: static)
   std::vector<int> dof_tree_;      // dof -> its tree
+  std::vector<std::pair<long, int>> pair_of_geoms_;  // (low geom * ngeom + high geom, pair id), sorted; mjCOL_PAIR
   std::vector<adroit::DataPtr> data_;  // one per worker
   std::vector<Scratch> scratch_;       // one per worker
 };

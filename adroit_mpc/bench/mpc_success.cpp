@@ -3,7 +3,7 @@
 // against predictive sampling, synergies on / off, force against pneumatic mode, on identical
 // trials. A program, not a test.
 //
-//   mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned,nocomp]
+//   mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned,nocomp,coldfd]
 //               [--out DIR] [--seed S] [--only-trial K] [--fixed-latency S] [--latency-sweep S,S,...]
 //               [--dt S] [--horizon S] [--skip K] [--sensed] [--feedback-scale F] [--contact M,S] [--events]
 //               [--compensation on|off|task] [--set key=number]... [--pool ilqg_key=number]...
@@ -12,6 +12,8 @@
 // policy is predicted to reach when the plan takes over, at the planning latency: the fixed one,
 // else the median of the trial's last nine), as the node's ~latency_compensation; default: the
 // task's hint (type on). Variant nocomp is iLQG without it whatever the setting: its baseline.
+// Variant coldfd is iLQG with the finite differences solved from the knot's warm start, as
+// mjd_transitionFD (fd_derivatives.h): the baseline of solving them from the nominal's solution.
 // The table's "start" column says how far each plan's starting state was from the state when it
 // took over (joint RMS, median): the prediction's error, or without it the measured state's age.
 //
@@ -126,6 +128,7 @@ struct Variant {
   bool open_loop_reference = false;  // pneumatic: the plan's tensions on each new plan only
   bool world_as_planned = false;  // the simulation runs the planning MJCF (diagnostic, see --variants)
   bool compensate = true;  // plan from the state predicted at the expected latency (latency_compensation.h)
+  bool fd_warmstart = true;  // finite-difference nudges solved from the nominal's solution (fd_derivatives.h)
 };
 
 struct TrialSpec {
@@ -138,6 +141,9 @@ struct TrialSpec {
 struct TrialResult {
   bool success = false;
   double final_error = 0, lowest_z = 0, duration = 0, plan_ms_median = 0;
+  // Table 6.2's split of an optimisation, ms, median over the trial's plans: rollout,
+  // derivatives, cost derivatives, backward pass, line search.
+  std::array<double, 5> phase_ms_median{};
   // Joints (hinge and slide) of the state each plan started from against the state when it took
   // over, RMS, median over the plans: the prediction's error with latency compensation, the
   // measured state's staleness without.
@@ -239,6 +245,7 @@ class TrialRunner {
     compensation_ = defaults.numbers.count("latency_compensation") &&
                     paramNumber(task, defaults, "latency_compensation", 0, 1) > 0.5;
     settings_.synergies = variant.synergies;
+    settings_.fd_warmstart = variant.fd_warmstart;
     PlanningModelSettings ms;
     ms.timestep = settings_.dt;
     if (task == "type") ms.contact_margin = 0.001, ms.contact_softness = 0.001;  // as the node
@@ -312,6 +319,7 @@ class TrialRunner {
     force_trace_.clear();
     r.lowest_z = 1e9;
     std::vector<double> plan_seconds, start_errors;
+    std::array<std::vector<double>, 5> phases;
     LatencyEstimate latency_estimate;
     PlanPolicy active, fresh;
     bool have_policy = false;
@@ -345,6 +353,9 @@ class TrialRunner {
                            state);
       planner->setState(state);
       const OptimizeReport report = planner->optimize();
+      for (std::size_t k = 0; k < phases.size(); ++k)
+        phases[k].push_back(std::array<double, 5>{report.rollout, report.derivatives, report.cost, report.backward,
+                                                  report.line_search}[k]);
       const double latency = fixed_latency_ >= 0 ? fixed_latency_ : clock.elapsed();
       plan_seconds.push_back(latency);
       latency_estimate.record(latency);
@@ -382,6 +393,7 @@ class TrialRunner {
     }
     r.duration = d->time - release_time;
     r.plan_ms_median = 1e3 * adroit::percentile(plan_seconds, 50);
+    for (std::size_t k = 0; k < phases.size(); ++k) r.phase_ms_median[k] = 1e3 * adroit::percentile(phases[k], 50);
     r.start_error_median = start_errors.empty() ? 0 : adroit::percentile(start_errors, 50);
     if (task_name_ == "type") {
       auto& type = static_cast<TypeTask&>(*task);
@@ -747,7 +759,7 @@ int main(int argc, char** argv) {
     else {
       std::fprintf(stderr,
                    "usage: mpc_success [--trials N] [--tasks catch,relocate,type] "
-                   "[--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned,nocomp] [--out DIR] [--seed S] "
+                   "[--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned,nocomp,coldfd] [--out DIR] [--seed S] "
                    "[--only-trial K] [--fixed-latency S] [--latency-sweep S,S,...] [--dt S] [--horizon S] [--skip K] [--sensed] "
                    "[--feedback-scale F] [--compensation on|off|task] "
                    "[--contact M,S] [--events] [--set key=number]... [--pool ilqg_key=number]...\n");
@@ -772,11 +784,12 @@ int main(int argc, char** argv) {
                                                 {"pneumatic", {"pneumatic", "ilqg", true, true}},
                                                 {"pneumatic_open", {"pneumatic_open", "ilqg", true, true, true}},
                                                 {"as_planned", {"as_planned", "ilqg", true, false, false, true}},
-                                                {"nocomp", {"nocomp", "ilqg", true, false, false, false, false}}};
+                                                {"nocomp", {"nocomp", "ilqg", true, false, false, false, false}},
+                                                {"coldfd", {"coldfd", "ilqg", true, false, false, false, true, false}}};
   std::vector<Variant> variants;
   for (const auto& v : split(variants_arg)) {
     if (!known.count(v)) {
-      std::fprintf(stderr, "mpc_success: unknown variant '%s' (known: ilqg, sampling, nosyn, pneumatic, pneumatic_open, as_planned, nocomp)\n", v.c_str());
+      std::fprintf(stderr, "mpc_success: unknown variant '%s' (known: ilqg, sampling, nosyn, pneumatic, pneumatic_open, as_planned, nocomp, coldfd)\n", v.c_str());
       return 2;
     }
     variants.push_back(known.at(v));
@@ -837,6 +850,7 @@ int main(int argc, char** argv) {
       int ok = 0, diverged = 0, keys_ok = 0, keys_all = 0;
       double error_sum = 0, typing_time = 0;
       std::vector<double> plan_ms, start_errors;
+      std::array<std::vector<double>, 5> phase_ms;
       for (const auto& spec : specs) {
         runner.resetTrace();
         if (print_events && task == "type")
@@ -856,6 +870,7 @@ int main(int argc, char** argv) {
         typing_time += r.duration;
         plan_ms.push_back(r.plan_ms_median);
         start_errors.push_back(r.start_error_median);
+        for (std::size_t k = 0; k < phase_ms.size(); ++k) phase_ms[k].push_back(r.phase_ms_median[k]);
         trials_csv << task << "," << variant.name << "," << spec.index << "," << r.success << "," << r.final_error << ","
                    << (r.lowest_z > 1e8 ? 0 : r.lowest_z) << "," << r.farthest_from_grasp << "," << r.keys_correct << "," << r.keys_total << ","
                    << r.duration << "," << r.plan_ms_median << "," << r.diverged << "\n";
@@ -875,6 +890,11 @@ int main(int argc, char** argv) {
                   specs.size(), error_sum / specs.size(),
                   task == "type" ? std::to_string(static_cast<int>(std::lround(speed[task][variant.name]))).c_str() : "-",
                   adroit::percentile(plan_ms, 50), diverged, adroit::percentile(start_errors, 50));
+      std::printf("%-9s %-14s plan ms, table 6.2 split (median over trials): rollout %.1f, derivatives %.1f, cost %.1f, "
+                  "backward %.1f, line search %.1f\n",
+                  "", "", adroit::percentile(phase_ms[0], 50), adroit::percentile(phase_ms[1], 50),
+                  adroit::percentile(phase_ms[2], 50), adroit::percentile(phase_ms[3], 50),
+                  adroit::percentile(phase_ms[4], 50));
       if (variant.pneumatic) {
         std::printf("%-9s %-14s pools: %.2f ms per 5 ms tick for %zu cylinders (median, one core)\n", "", "",
                     1e3 * runner.poolTickMedian(), runner.cylinders());

@@ -24,6 +24,8 @@
 #include <adroit_mpc/task.h>
 #include <adroit_mpc/task_params.h>
 
+#include <array>
+
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -308,6 +310,69 @@ int main(int argc, char** argv) {
       std::snprintf(label, sizeof label, "%s (%d contacts)", keypad ? "keypad at rest" : "bottle falling", d->ncon);
       std::printf("%-34s %8d %8d %12.2f %12.2f %7.2f %10.1e\n", label, m->nv, columns, a, b, b / a,
                   (A - Eigen::MatrixXd(A_ref)).cwiseAbs().maxCoeff());
+    }
+
+    // 1c. Explicit contact pairs (planning_model.h, the default) against MuJoCo's dynamic
+    // collisions on the same knots, alternating blocks: one step, and one grouped FD knot.
+    std::printf("\nCollision by explicit pairs (the default) against MuJoCo's dynamic collisions, same knots\n");
+    std::printf("%-34s %7s %11s %11s %7s %11s %11s %7s\n", "knot", "pairs", "step dyn", "step pairs", "ratio",
+                "FD dyn", "FD pairs", "ratio");
+    // The knot's state into the working data, as a rollout sets it (a full mj_copyData would
+    // cost more than the step).
+    const auto setKnot = [](const mjModel* m, const mjData* from, mjData* to) {
+      mju_copy(to->qpos, from->qpos, m->nq);
+      mju_copy(to->qvel, from->qvel, m->nv);
+      mju_copy(to->act, from->act, m->na);
+      mju_copy(to->ctrl, from->ctrl, m->nu);
+      mju_zero(to->qacc_warmstart, m->nv);
+      to->time = from->time;
+    };
+    for (const char* which : {"keypad", "bottle"}) {
+      const bool keypad = std::string(which) == "keypad";
+      std::array<adroit::ModelPtr, 2> models;  // dynamic, explicit pairs
+      std::array<adroit::DataPtr, 2> knots, work;
+      std::array<FdDerivatives, 2> fds;
+      for (int k = 0; k < 2; ++k) {
+        PlanningModelSettings s;
+        s.timestep = 0.01;
+        if (keypad) s.contact_margin = s.contact_softness = 0.001;
+        s.explicit_pairs = k == 1;
+        models[k] = loadPlanningModel(adroit::description::sceneFile(scene.share, which, true), s);
+        const mjModel* m = models[k].get();
+        knots[k] = adroit::makeData(m);
+        work[k] = adroit::makeData(m);
+        mj_resetDataKeyframe(m, knots[k].get(), mj_name2id(m, mjOBJ_KEY, "rest"));
+        const int object = mj_name2id(m, mjOBJ_BODY, "object");
+        if (object >= 0) knots[k]->qpos[m->jnt_qposadr[m->body_jntadr[object]] + 2] += 0.15;  // above the palm
+        for (int a = 0; a < m->nu; ++a) knots[k]->ctrl[a] = m->actuator_ctrlrange[2 * a];
+        mj_forward(m, knots[k].get());
+        fds[k].initialize(m, 1, 1, FdSettings{1e-6, false, 1, true});
+      }
+      const int nx = 2 * models[0]->nv + models[0]->na;
+      Eigen::MatrixXd A(nx, nx), B(nx, models[0]->nu);
+      std::array<std::vector<double>, 2> step_us, fd_ms;
+      for (int block = 0; block < 10; ++block) {
+        for (int k = 0; k < 2; ++k) {
+          const mjModel* m = models[k].get();
+          adroit::Stopwatch clock;
+          for (int i = 0; i < 100; ++i) {
+            setKnot(m, knots[k].get(), work[k].get());
+            mj_step(m, work[k].get());
+          }
+          step_us[k].push_back(1e6 * clock.elapsed() / 100);
+          clock.restart();
+          for (int i = 0; i < 5; ++i) {
+            setKnot(m, knots[k].get(), work[k].get());
+            fds[k].knot(work[k].get(), 0, A, B);
+          }
+          fd_ms[k].push_back(1e3 * clock.elapsed() / 5);
+        }
+      }
+      const double s0 = adroit::percentile(step_us[0], 50), s1 = adroit::percentile(step_us[1], 50);
+      const double f0 = adroit::percentile(fd_ms[0], 50), f1 = adroit::percentile(fd_ms[1], 50);
+      std::printf("%-34s %7d %9.1f us %9.1f us %7.2f %8.2f ms %8.2f ms %7.2f\n",
+                  keypad ? "keypad at rest (typing contacts)" : "bottle falling", models[1]->npair, s0, s1, s1 / s0, f0,
+                  f1, f1 / f0);
     }
 
     // 2. Closed loop, chosen defaults (config/mpc.yaml).

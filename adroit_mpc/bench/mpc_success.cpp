@@ -3,7 +3,7 @@
 // against predictive sampling, synergies on / off, force against pneumatic mode, on identical
 // trials. A program, not a test.
 //
-//   mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned,nocomp,coldfd]
+//   mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned,nocomp,warmfd]
 //               [--out DIR] [--seed S] [--only-trial K] [--fixed-latency S] [--latency-sweep S,S,...]
 //               [--dt S] [--horizon S] [--skip K] [--sensed] [--feedback-scale F] [--contact M,S] [--events]
 //               [--compensation on|off|task] [--set key=number]... [--pool ilqg_key=number]...
@@ -12,8 +12,8 @@
 // policy is predicted to reach when the plan takes over, at the planning latency: the fixed one,
 // else the median of the trial's last nine), as the node's ~latency_compensation; default: the
 // task's hint (type on). Variant nocomp is iLQG without it whatever the setting: its baseline.
-// Variant coldfd is iLQG with the finite differences solved from the knot's warm start, as
-// mjd_transitionFD (fd_derivatives.h): the baseline of solving them from the nominal's solution.
+// Variant warmfd is iLQG with the finite differences solved from the nominal step's solution
+// (PlannerSettings::fd_warmstart, off by default) instead of the knot's warm start.
 // The table's "start" column says how far each plan's starting state was from the state when it
 // took over (joint RMS, median): the prediction's error, or without it the measured state's age.
 //
@@ -128,7 +128,7 @@ struct Variant {
   bool open_loop_reference = false;  // pneumatic: the plan's tensions on each new plan only
   bool world_as_planned = false;  // the simulation runs the planning MJCF (diagnostic, see --variants)
   bool compensate = true;  // plan from the state predicted at the expected latency (latency_compensation.h)
-  bool fd_warmstart = true;  // finite-difference nudges solved from the nominal's solution (fd_derivatives.h)
+  bool fd_warmstart = false;  // finite-difference nudges solved from the nominal's solution (fd_derivatives.h)
 };
 
 struct TrialSpec {
@@ -759,7 +759,7 @@ int main(int argc, char** argv) {
     else {
       std::fprintf(stderr,
                    "usage: mpc_success [--trials N] [--tasks catch,relocate,type] "
-                   "[--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned,nocomp,coldfd] [--out DIR] [--seed S] "
+                   "[--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned,nocomp,warmfd] [--out DIR] [--seed S] "
                    "[--only-trial K] [--fixed-latency S] [--latency-sweep S,S,...] [--dt S] [--horizon S] [--skip K] [--sensed] "
                    "[--feedback-scale F] [--compensation on|off|task] "
                    "[--contact M,S] [--events] [--set key=number]... [--pool ilqg_key=number]...\n");
@@ -785,11 +785,11 @@ int main(int argc, char** argv) {
                                                 {"pneumatic_open", {"pneumatic_open", "ilqg", true, true, true}},
                                                 {"as_planned", {"as_planned", "ilqg", true, false, false, true}},
                                                 {"nocomp", {"nocomp", "ilqg", true, false, false, false, false}},
-                                                {"coldfd", {"coldfd", "ilqg", true, false, false, false, true, false}}};
+                                                {"warmfd", {"warmfd", "ilqg", true, false, false, false, true, true}}};
   std::vector<Variant> variants;
   for (const auto& v : split(variants_arg)) {
     if (!known.count(v)) {
-      std::fprintf(stderr, "mpc_success: unknown variant '%s' (known: ilqg, sampling, nosyn, pneumatic, pneumatic_open, as_planned, nocomp, coldfd)\n", v.c_str());
+      std::fprintf(stderr, "mpc_success: unknown variant '%s' (known: ilqg, sampling, nosyn, pneumatic, pneumatic_open, as_planned, nocomp, warmfd)\n", v.c_str());
       return 2;
     }
     variants.push_back(known.at(v));

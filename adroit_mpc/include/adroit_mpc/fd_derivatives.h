@@ -45,8 +45,9 @@ struct FdSettings {
   // Every nudge (and the nominal step again) starts the constraint solver from the nominal
   // step's solution instead of the knot's warm start: MuJoCo's Newton solver then converges
   // in an iteration or so instead of walking the contacts' active set from the unconstrained
-  // acceleration each time. false: mjd_transitionFD's warm start (the knot's).
-  bool warmstart_from_nominal = true;
+  // acceleration each time (a keypad knot: 0.35x the instructions). false (default):
+  // mjd_transitionFD's warm start, the knot's (see PlannerSettings::fd_warmstart).
+  bool warmstart_from_nominal = false;
 };
 
 class FdDerivatives {

@@ -69,7 +69,7 @@ MpcParams readParams(const ros::NodeHandle& pnh) {
                                  "iterations", "synergies", "derivative_skip", "samples", "noise_scale",
                                  "control_rate", "state_timeout", "feedback_scale", "marker_rate",
                                  "diagnostics_period", "nice", "control_priority", "lockstep", "physics_timestep", "lockstep_controls_per_plan",
-                                 "min_tension", "latency_compensation"};
+                                 "min_tension", "latency_compensation", "fd_warmstart"};
   // dynamic_reconfigure keeps its values (task weights) among the private parameters too.
   for (const auto& d : adroit_mpc::MpcConfig::__getParamDescriptions__()) keys.insert(d->name);
   p.checkKeys("", keys);
@@ -103,6 +103,7 @@ MpcParams readParams(const ros::NodeHandle& pnh) {
   s.iterations = p.integer("iterations", s.iterations, 1, 100);
   s.synergies = p.boolean("synergies", s.synergies);
   s.derivative_skip = p.integer("derivative_skip", static_cast<int>(hint("derivative_skip", s.derivative_skip)), 1, 100);
+  s.fd_warmstart = p.boolean("fd_warmstart", s.fd_warmstart);
   s.samples = p.integer("samples", s.samples, 1, 4096);
   s.noise_scale = p.number("noise_scale", s.noise_scale, 0.0, 10.0);
   out.feedback_scale = p.number("feedback_scale", hint("feedback_scale", out.feedback_scale), 0.0, 1.0);

@@ -353,9 +353,9 @@ class TrialRunner {
                            state);
       planner->setState(state);
       const OptimizeReport report = planner->optimize();
-      for (std::size_t k = 0; k < phases.size(); ++k)
-        phases[k].push_back(std::array<double, 5>{report.rollout, report.derivatives, report.cost, report.backward,
-                                                  report.line_search}[k]);
+      const std::array<double, 5> split{report.rollout, report.derivatives, report.cost, report.backward,
+                                        report.line_search};
+      for (std::size_t k = 0; k < phases.size(); ++k) phases[k].push_back(split[k]);
       const double latency = fixed_latency_ >= 0 ? fixed_latency_ : clock.elapsed();
       plan_seconds.push_back(latency);
       latency_estimate.record(latency);

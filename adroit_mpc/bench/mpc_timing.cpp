@@ -193,13 +193,6 @@ std::string fixedTendonXml(const std::string& xml, const mjModel* m) {
   return built.str();
 }
 
-std::string readFile(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -258,7 +251,7 @@ int main(int argc, char** argv) {
     PlanningModelSettings base_settings;
     base_settings.timestep = 0.005;
     auto base = loadPlanningModel(scene.planning_file, base_settings);
-    auto fixed = adroit::loadModelString(fixedTendonXml(readFile(scene.planning_file), base.get())).model;
+    auto fixed = adroit::loadModelString(fixedTendonXml(readModelText(scene.planning_file), base.get())).model;
     applyPlanningSettings(fixed.get(), base_settings);
     double fixed_step_us, fixed_fd_ms;
     stepAndFdTime(fixed.get(), fixed_step_us, fixed_fd_ms);

@@ -17,14 +17,6 @@ void setSoftness(mjtNum* solref, mjtNum* solimp, double softness, double timeste
   if (solref[0] > 0) solref[0] = std::max(solref[0], 2 * timestep);  // standard (stiffness) form
 }
 
-std::string readFile(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw adroit::ModelLoadError("cannot read model file " + path);
-  std::stringstream text;
-  text << in.rdbuf();
-  return text.str();
-}
-
 // A pair's attributes as MuJoCo 2.2.2 mixes them for a dynamic contact of geoms a and b
 // (mj_contactParam, margin and gap of mj_collideGeoms).
 std::string mixedPairElement(const mjModel* m, int a, int b) {
@@ -112,6 +104,14 @@ std::string explicitContactPairsXml(const std::string& xml, const mjModel* m, in
   return out;
 }
 
+std::string readModelText(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw adroit::ModelLoadError("cannot read model file " + path);
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
 void applyPlanningSettings(mjModel* m, const PlanningModelSettings& s) {
   if (!(s.timestep > 0) || !std::isfinite(s.timestep))
     throw std::invalid_argument("planning model: timestep must be positive, got " + std::to_string(s.timestep));
@@ -185,7 +185,7 @@ adroit::ModelPtr loadPlanningModel(const std::string& path, const PlanningModelS
   if (!settings.explicit_pairs || loaded.model->opt.collision != mjCOL_ALL) return std::move(loaded.model);
   // The pairs take their parameters from the geoms as the settings left them (margin,
   // softness), and the settings then give the new pairs what they give every pair.
-  const std::string xml = explicitContactPairsXml(readFile(path), loaded.model.get());
+  const std::string xml = explicitContactPairsXml(readModelText(path), loaded.model.get());
   if (xml.empty()) return std::move(loaded.model);  // an unnamed geom: dynamic collisions as they are
   adroit::LoadedModel paired = adroit::loadModelString(xml);
   applyPlanningSettings(paired.model.get(), settings);
@@ -208,7 +208,7 @@ std::string unprunedXml(const std::string& xml) {
 }
 
 adroit::ModelPtr loadUnprunedPlanningModel(const std::string& path, const PlanningModelSettings& settings) {
-  adroit::LoadedModel loaded = adroit::loadModelString(unprunedXml(readFile(path)));
+  adroit::LoadedModel loaded = adroit::loadModelString(unprunedXml(readModelText(path)));
   applyPlanningSettings(loaded.model.get(), settings);
   return std::move(loaded.model);
 }

@@ -41,6 +41,9 @@ struct PlanningModelSettings {
 // scene without a body "object").
 void applyPlanningSettings(mjModel* model, const PlanningModelSettings& settings);
 
+// The MJCF text of a model file. Throws adroit::ModelLoadError when it cannot be read.
+std::string readModelText(const std::string& path);
+
 // Every geom pair MuJoCo 2.2.2's dynamic collision mechanism would test in `compiled` (the
 // model of `xml`): contype/conaffinity, different weld bodies, the parent filter, <exclude>s,
 // body pairs without an explicit pair, written into the MJCF text as explicit <pair>s with

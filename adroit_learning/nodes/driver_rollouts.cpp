@@ -128,6 +128,7 @@ void DriverConnection::onOdometry(const nav_msgs::Odometry::ConstPtr& msg) {
 void DriverConnection::onSafeState(const std_msgs::Bool::ConstPtr& msg) {
   std::lock_guard<std::mutex> lock(mutex_);
   safe_state_ = msg->data;
+  cv_.notify_all();  // a wait for states ends: a driver in its safe state after a fault publishes none
 }
 
 bool DriverConnection::safe(std::string& error) {
@@ -200,7 +201,8 @@ bool DriverConnection::waitForStreams(std::string& error) {
   }
   std::unique_lock<std::mutex> lock(mutex_);
   if (cv_.wait_for(lock, std::chrono::duration<double>(timeout_), have)) return true;
-  error = "driver " + ns_ + ": no joint_states / actuator_states within " + std::to_string(timeout_) + " s";
+  error = "driver " + ns_ + ": no joint_states / actuator_states within " + std::to_string(timeout_) + " s" +
+          (safe_state_ ? ": it is in its safe state (a physics fault publishes no state; its log says which)" : "");
   return false;
 }
 
@@ -354,13 +356,17 @@ bool DriverConnection::observe(int t, Observation& obs, std::string& error) {
 bool DriverConnection::waitForState(ros::Time min_stamp, Observation& obs, std::string& error) {
   if (min_stamp <= reset_floor_) min_stamp = reset_floor_ + ros::Duration(0, 1);
   std::unique_lock<std::mutex> lock(mutex_);
-  const bool fresh = cv_.wait_for(lock, std::chrono::duration<double>(timeout_), [&] {
+  const auto fresh = [&] {
     return joints_ && actuators_ && joints_->header.stamp >= min_stamp && actuators_->header.stamp >= min_stamp &&
            (odom_sub_.getNumPublishers() == 0 || (odom_ && odom_->header.stamp >= min_stamp));
-  });
-  if (!fresh) {
+  };
+  cv_.wait_for(lock, std::chrono::duration<double>(timeout_), [&] { return fresh() || safe_state_; });
+  if (!fresh()) {
+    const auto newest = [](const auto& msg) { return msg ? std::to_string(msg->header.stamp.toSec()) + " s" : "none"; };
     error = "driver " + ns_ + ": no state stamped after " + std::to_string(min_stamp.toSec()) + " s within " +
-            std::to_string(timeout_) + " s";
+            std::to_string(timeout_) + " s (newest joint_states " + newest(joints_) + ", actuator_states " +
+            newest(actuators_) + ")" +
+            (safe_state_ ? ": it is in its safe state (a physics fault publishes no state; its log says which)" : "");
     return false;
   }
   last_observed_ = joints_->header.stamp;

@@ -6,6 +6,7 @@
 //   mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned,nocomp,warmfd]
 //               [--out DIR] [--seed S] [--only-trial K] [--fixed-latency S] [--latency-sweep S,S,...]
 //               [--dt S] [--horizon S] [--skip K] [--sensed] [--feedback-scale F] [--contact M,S] [--events]
+//               [--idle S]
 //               [--compensation on|off|task] [--set key=number]... [--pool ilqg_key=number]...
 //
 // --compensation: latency compensation (latency_compensation.h: plan from the state the running
@@ -33,6 +34,8 @@
 // shortfall is model mismatch rather than the cost or the planner.
 // --only-trial K: of the N seeded trials, run trial K alone (its traces and states are written).
 // --events: print each trial's task events (phase, relocation stage, keys) with their time.
+// --idle S: typing only: the hand rests over the keys S seconds, closed loop, before the
+//   sequence is given; keys registered meanwhile are typed unasked (printed, CSV `unasked`).
 // --set key=number: a task parameter (weight, threshold) over config/tasks/<task>.yaml, for
 // tuning without a rebuild (the --latency-sweep runs use it too).
 // --pool ilqg_key=number: a setting of the pools' iLQG (names of IlqgParams, setIlqgParam),
@@ -150,6 +153,7 @@ struct TrialResult {
   double start_error_median = 0;
   double farthest_from_grasp = 0;  // relocation, from the goal on: object centre to S_grasp (m)
   int keys_correct = 0, keys_total = 0, diverged = 0;
+  int unasked = 0;  // typing with --idle: keys registered before the sequence was given
   std::vector<std::pair<double, double>> trace;  // (t, error)
   std::vector<std::vector<double>> qpos_trace;   // qpos at the trace times (for render_states)
 };
@@ -311,7 +315,11 @@ class TrialRunner {
     if (task_name_ == "catch") params.vectors["goal_position"] = {spec.goal.x(), spec.goal.y(), spec.goal.z()};
     auto task = makeTask(task_name_, params);
     task->bind(plan_model_.get(), variant_.synergies ? Synergies::kCount : 0);
-    if (!spec.keys.empty() && !task->setSequence(spec.keys, &why)) throw std::runtime_error(why);
+    // --idle: the hand rests over the keys that long, closed loop, before the sequence comes.
+    const bool idle_first = task_name_ == "type" && idle_ > 0;
+    if (!idle_first && !spec.keys.empty() && !task->setSequence(spec.keys, &why)) throw std::runtime_error(why);
+    bool sequence_given = !idle_first;
+    keys_registered_ = 0;
     auto planner = makePlanner(variant_.planner);
     planner->initialize(plan_model_.get(), *task, settings_);
 
@@ -333,7 +341,8 @@ class TrialRunner {
     int warmup = kWarmupIterations;
     bool goal_given = false;
     const double release_time = d->time + kPreRoll;
-    const double duration = release_time + (task_name_ == "type" ? 1.5 * spec.keys.size() + 0.5 : duration_);
+    const double sequence_time = release_time + (idle_first ? idle_ : 0.0);
+    const double duration = sequence_time + (task_name_ == "type" ? 1.5 * spec.keys.size() + 0.5 : duration_);
     while (d->time < duration) {
       // The state the optimisation starts from; the task's progress observed on it.
       state.time = d->time;
@@ -342,6 +351,11 @@ class TrialRunner {
       if (task_name_ == "relocate" && !goal_given && d->time >= release_time + kRelocateGoalDelay) {
         goal_given = true;  // as a user would: once the ball is held
         if (!task->setGoal(spec.goal, Eigen::Quaterniond::Identity(), &why)) throw std::runtime_error("goal: " + why);
+      }
+      if (!sequence_given && d->time >= sequence_time) {
+        sequence_given = true;
+        r.unasked = keys_registered_;
+        if (!task->setSequence(spec.keys, &why)) throw std::runtime_error(why);
       }
       observeState(*task, state);
       planner->setTask(*task);
@@ -389,9 +403,9 @@ class TrialRunner {
         have_policy = true;
         if (variant_.open_loop_reference) sendReference(active_reference);
       }
-      if (task_name_ == "type" && task->error(plan_model_.get(), observe_.get()) == 0) break;
+      if (task_name_ == "type" && sequence_given && task->error(plan_model_.get(), observe_.get()) == 0) break;
     }
-    r.duration = d->time - release_time;
+    r.duration = d->time - sequence_time;
     r.plan_ms_median = 1e3 * adroit::percentile(plan_seconds, 50);
     for (std::size_t k = 0; k < phases.size(); ++k) r.phase_ms_median[k] = 1e3 * adroit::percentile(phases[k], 50);
     r.start_error_median = start_errors.empty() ? 0 : adroit::percentile(start_errors, 50);
@@ -446,8 +460,10 @@ class TrialRunner {
     mju_copy(o->qvel, s.qvel.data(), pm->nv);
     if (pm->na) mju_copy(o->act, s.act.data(), pm->na);
     mj_forward(pm, o);
-    for (const auto& e : task.observe(pm, o, s.time))
+    for (const auto& e : task.observe(pm, o, s.time)) {
+      keys_registered_ += e.kind == "key";
       if (print_events_) std::printf("  t %.3f %s %s\n", s.time, e.kind.c_str(), e.detail.c_str());
+    }
   }
 
   // One driver step (2 ms). Force mode: the policy's tensions every step. Pneumatic mode:
@@ -566,6 +582,7 @@ class TrialRunner {
   void setFixedLatency(double seconds) { fixed_latency_ = seconds; }
   // Print the task's events (phases, relocation stages, keys) as observe() reports them.
   void setPrintEvents(bool on) { print_events_ = on; }
+  void setIdle(double seconds) { idle_ = seconds; }
   // Task parameters (numbers: weights, thresholds) over the task's defaults.
   void setParams(const std::map<std::string, double>& numbers) { param_overrides_ = numbers; }
   void setPoolParams(const pneumatics::IlqgParams& p) {
@@ -693,6 +710,8 @@ class TrialRunner {
   double duration_ = 0, next_trace_ = 0, fixed_latency_ = -1;
   int steps_since_observe_ = 0;
   bool print_events_ = false;
+  double idle_ = 0;          // typing: s at rest before the sequence (--idle)
+  int keys_registered_ = 0;  // key events of the trial so far
   std::map<std::string, double> param_overrides_;
 };
 
@@ -715,6 +734,7 @@ int main(int argc, char** argv) {
   std::string compensation = "task";  // on | off | task (its hint)
   double contact_margin = -1, contact_softness = -1;  // --contact M,S
   bool print_events = false;
+  double idle = 0;  // --idle S: typing rests that long before its sequence
   std::map<std::string, double> params;  // --set key=value
   pneumatics::IlqgParams pool_ilqg;      // --pool key=value; the pools' settings as config/pools.yaml has them
   pool_ilqg.iterations = 1;
@@ -745,6 +765,7 @@ int main(int argc, char** argv) {
     else if (a == "--horizon" && i + 1 < argc) overrides.horizon = std::atof(argv[++i]);
     else if (a == "--skip" && i + 1 < argc) overrides.derivative_skip = std::atoi(argv[++i]);
     else if (a == "--events") print_events = true;
+    else if (a == "--idle" && i + 1 < argc) idle = std::atof(argv[++i]);
     else if (a == "--set" && i + 1 < argc && std::strchr(argv[i + 1], '=')) {
       const std::string kv = argv[++i];
       params[kv.substr(0, kv.find('='))] = std::atof(kv.c_str() + kv.find('=') + 1);
@@ -762,7 +783,7 @@ int main(int argc, char** argv) {
                    "[--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned,nocomp,warmfd] [--out DIR] [--seed S] "
                    "[--only-trial K] [--fixed-latency S] [--latency-sweep S,S,...] [--dt S] [--horizon S] [--skip K] [--sensed] "
                    "[--feedback-scale F] [--compensation on|off|task] "
-                   "[--contact M,S] [--events] [--set key=number]... [--pool ilqg_key=number]...\n");
+                   "[--contact M,S] [--events] [--idle S] [--set key=number]... [--pool ilqg_key=number]...\n");
       return 2;
     }
   }
@@ -807,7 +828,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "mpc_success: cannot write into %s\n", out_dir.c_str());
     return 2;
   }
-  trials_csv << "task,variant,trial,success,final_error,lowest_z,farthest_from_grasp,keys_correct,keys_total,duration,plan_ms,diverged\n";
+  trials_csv << "task,variant,trial,success,final_error,lowest_z,farthest_from_grasp,keys_correct,keys_total,duration,plan_ms,diverged,unasked\n";
   traces_csv << "task,variant,t,error\n";
   std::printf("Behaviour MPC success, %d trial(s) per task, emulated real time on this machine (seed %u)\n\n", trials,
               seed);
@@ -845,9 +866,10 @@ int main(int argc, char** argv) {
       if (feedback_scale >= 0) runner.setFeedbackScale(feedback_scale);
       if (compensation != "task") runner.setCompensation(compensation == "on");
       runner.setPrintEvents(print_events);
+      runner.setIdle(idle);
       runner.setParams(params);
       runner.setPoolParams(pool_ilqg);
-      int ok = 0, diverged = 0, keys_ok = 0, keys_all = 0;
+      int ok = 0, diverged = 0, keys_ok = 0, keys_all = 0, unasked = 0, unasked_trials = 0;
       double error_sum = 0, typing_time = 0;
       std::vector<double> plan_ms, start_errors;
       std::array<std::vector<double>, 5> phase_ms;
@@ -867,13 +889,15 @@ int main(int argc, char** argv) {
         error_sum += r.final_error;
         keys_ok += r.keys_correct;
         keys_all += r.keys_total;
+        unasked += r.unasked;
+        unasked_trials += r.unasked > 0;
         typing_time += r.duration;
         plan_ms.push_back(r.plan_ms_median);
         start_errors.push_back(r.start_error_median);
         for (std::size_t k = 0; k < phase_ms.size(); ++k) phase_ms[k].push_back(r.phase_ms_median[k]);
         trials_csv << task << "," << variant.name << "," << spec.index << "," << r.success << "," << r.final_error << ","
                    << (r.lowest_z > 1e8 ? 0 : r.lowest_z) << "," << r.farthest_from_grasp << "," << r.keys_correct << "," << r.keys_total << ","
-                   << r.duration << "," << r.plan_ms_median << "," << r.diverged << "\n";
+                   << r.duration << "," << r.plan_ms_median << "," << r.diverged << "," << r.unasked << "\n";
         if (&spec == &specs.front()) {
           for (const auto& [t, e] : r.trace) traces_csv << task << "," << variant.name << "," << t << "," << e << "\n";
           runner.writeStates(out_dir + "/states_" + task + "_" + variant.name + ".csv", r);
@@ -895,6 +919,9 @@ int main(int argc, char** argv) {
                   "", "", adroit::percentile(phase_ms[0], 50), adroit::percentile(phase_ms[1], 50),
                   adroit::percentile(phase_ms[2], 50), adroit::percentile(phase_ms[3], 50),
                   adroit::percentile(phase_ms[4], 50));
+      if (task == "type" && idle > 0)
+        std::printf("%-9s %-14s at rest for %.1f s before each sequence: %d key(s) typed unasked, in %d of %zu trials\n",
+                    "", "", idle, unasked, unasked_trials, specs.size());
       if (variant.pneumatic) {
         std::printf("%-9s %-14s pools: %.2f ms per 5 ms tick for %zu cylinders (median, one core)\n", "", "",
                     1e3 * runner.poolTickMedian(), runner.cylinders());
@@ -940,7 +967,7 @@ int main(int argc, char** argv) {
         keys_all += r.keys_total;
         trials_csv << task << ",latency_" << value << "," << spec.index << "," << r.success << "," << r.final_error
                    << "," << (r.lowest_z > 1e8 ? 0 : r.lowest_z) << "," << r.farthest_from_grasp << "," << r.keys_correct << "," << r.keys_total << ","
-                   << r.duration << "," << 1e3 * latency << "," << r.diverged << "\n";
+                   << r.duration << "," << 1e3 * latency << "," << r.diverged << "," << r.unasked << "\n";
       }
       if (task == "type")
         std::printf("  latency %5.0f ms: %d/%zu sequences, %d/%d keys\n", 1e3 * latency, ok, specs.size(), keys_ok,

@@ -221,6 +221,13 @@ void TypeTask::bind(const mjModel* model, int synergy_dims) {
                                   entry.first + "'");
     key_finger_[it - labels_.begin()] = entry.second;
   }
+  // Each finger's home: its key nearest to its fingertip at the keyframe.
+  home_key_.fill(kNoKey);
+  for (int k = 0; k < nkeys_; ++k) {
+    int& home = home_key_[key_finger_[k]];
+    const Eigen::Vector3d& tip_f = tip[key_finger_[k]];
+    if (home == kNoKey || (top_world[k] - tip_f).norm() < (top_world[home] - tip_f).norm()) home = k;
+  }
 
   digit_key_.fill(kNoKey);
   backspace_key_ = kNoKey;
@@ -414,6 +421,14 @@ double TypeTask::cost(const mjModel* m, const mjData* d, const Eigen::VectorXd* 
       if (key_finger_[n] != key_finger_[c]) tipTerm(n, key_hovers_[n], weights_[w_hover_] * s_up);
     }
   }
+  // Every finger with keys but no target now hovers above its home key. Resting on a key
+  // top, within the contact margin, a fingertip is one sensor-noise step from contact, and
+  // plans from such states jolt the hand (keys typed unasked, mpc_success --idle).
+  const int current_finger = target.current != kNoKey ? key_finger_[target.current] : -1;
+  const int next_finger = target.next != kNoKey ? key_finger_[target.next] : -1;
+  for (int f = 0; f < 5; ++f)
+    if (home_key_[f] != kNoKey && f != current_finger && f != next_finger)
+      tipTerm(home_key_[f], key_hovers_[home_key_[f]], weights_[w_hover_]);
   // Every other key stays up (accidental presses are typing errors).
   for (int k = 0; k < nkeys_; ++k)
     scratch.key_scales[k] = (k == target.current || k == target.next) ? 0.0 : 1.0 / key_travel_[k];

@@ -12,6 +12,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "adroit_mpc/planner.h"
 #include "adroit_mpc/planning_model.h"
 #include "adroit_mpc/task.h"
 #include "adroit_mpc/task_params.h"
@@ -274,6 +275,69 @@ TEST(TypingPlanningModel, ReleasedKeyReturnsAtThePlannerStep) {
   EXPECT_LT(highest, 0.004) << "the key flew more than 4 mm above its top";
   EXPECT_GT(last, -0.0005) << "the key did not come back up";
   EXPECT_LT(last, 0.003);
+}
+
+// Height of the lowest of ff, mf, rf's fingertips (the fingers with keys) above the key tops.
+double lowestTipAboveKeys(const mjModel* m, const mjData* d) {
+  double key_top = -1e9;
+  for (int g = 0; g < m->ngeom; ++g) {
+    const char* name = mj_id2name(m, mjOBJ_GEOM, g);
+    if (name && std::string(name).rfind("C_key_", 0) == 0) key_top = std::max(key_top, d->geom_xpos[3 * g + 2] + m->geom_size[3 * g + 2]);
+  }
+  double lowest = 1e9;
+  for (const char* site : {"S_fftip", "S_mftip", "S_rftip"})
+    lowest = std::min(lowest, d->site_xpos[3 * mj_name2id(m, mjOBJ_SITE, site) + 2]);
+  return lowest - key_top;
+}
+
+// With no sequence the hand must not idle with its fingertips on the key tops: at the
+// robot's minimum tension it sags onto the bottom row, within the contact margin, where
+// position noise turns plans into jolts that tap keys (mpc_success --idle). Closed-loop iLQG
+// from there lifts them off and types nothing.
+TEST(TypingPlanningModel, IdleHandLiftsItsFingertipsOffTheKeys) {
+  const adroit_mpc::TaskParams hints = adroit_mpc::defaultTaskParams("type");
+  adroit_mpc::PlanningModelSettings model_settings;
+  model_settings.timestep = hints.numbers.at("planner_dt");
+  model_settings.contact_margin = 0.001, model_settings.contact_softness = 0.001;  // as the node for typing
+  auto model = adroit_mpc::loadPlanningModel(
+      adroit::description::sceneFile(adroit_mpc::descriptionShareDir(), "keypad", true), model_settings);
+  const mjModel* m = model.get();
+  adroit::DataPtr sim = adroit::makeData(m);
+  mj_resetDataKeyframe(m, sim.get(), mj_name2id(m, mjOBJ_KEY, "rest"));
+  for (int i = 0; i < m->nu; ++i) sim->ctrl[i] = m->actuator_ctrlrange[2 * i];
+  while (sim->time < 1.0) mj_step(m, sim.get());
+  ASSERT_LT(lowestTipAboveKeys(m, sim.get()), 0.004) << "the sagged hand should rest near the keys";
+
+  TypeTask task;
+  task.bind(m, 5);
+  adroit_mpc::PlannerSettings settings;
+  settings.horizon = hints.numbers.at("horizon");
+  settings.dt = hints.numbers.at("planner_dt");
+  settings.derivative_skip = static_cast<int>(hints.numbers.at("derivative_skip"));
+  settings.threads = 2;
+  auto planner = adroit_mpc::makePlanner("ilqg");
+  planner->initialize(m, task, settings);
+  adroit_mpc::PlanPolicy policy;
+  adroit_mpc::PlannerState state;
+  const double start = sim->time;
+  int keys = 0;
+  while (sim->time < start + 0.6) {
+    state.time = sim->time;
+    state.qpos.assign(sim->qpos, sim->qpos + m->nq);
+    state.qvel.assign(sim->qvel, sim->qvel + m->nv);
+    state.act.assign(sim->act, sim->act + m->na);
+    for (const auto& e : task.observe(m, sim.get(), sim->time)) keys += e.kind == "key";
+    planner->setTask(task);
+    planner->setState(state);
+    ASSERT_FALSE(planner->optimize().diverged);
+    planner->policy(policy);
+    for (int k = 0; k < 2; ++k) {  // a plan every 20 ms, as the node in lockstep
+      policy.action(sim->time, sim->qpos, sim->qvel, sim->act, sim->ctrl);
+      mj_step(m, sim.get());
+    }
+  }
+  EXPECT_EQ(keys, 0);
+  EXPECT_GT(lowestTipAboveKeys(m, sim.get()), 0.005) << "an idle fingertip stayed on the keys";
 }
 
 TEST(TypingBinding, NeedsAKeypad) {

@@ -5,6 +5,8 @@
 //   S_up x (current key pressed towards full travel + its finger's tip to the key top)
 //   S_dn x (next key pressed + the next finger's tip to its key top)
 //   S_up x next key hover (the next finger above its key, when it is another finger)
+//   + home hover: every other finger with keys above its home key (its key nearest to it at
+//     the keyframe), at the same weight: no fingertip idles within reach of a key
 //   + other keys stay up + light posture towards the rest keyframe + control effort.
 // S_up rises at the last key event and falls key_period later (never sooner than min_lead
 // after the latest observation), so the plan runs through the transition to the next key.
@@ -115,6 +117,7 @@ class TypeTask : public Task {
   std::vector<BodyPoint> key_tops_;               // moving top centre of each key
   std::vector<BodyPoint> key_hovers_;             // fixed world points above each key
   std::vector<int> key_finger_;                   // per key
+  std::array<int, 5> home_key_{};                 // per finger: its key nearest at the keyframe (kNoKey: none)
   std::array<BodyPoint, 5> fingertips_{};
   std::array<int, 10> digit_key_{};               // '0'..'9' -> key index (kNoKey if absent)
   int backspace_key_ = kNoKey;

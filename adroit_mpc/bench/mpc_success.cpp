@@ -3,7 +3,7 @@
 // against predictive sampling, synergies on / off, force against pneumatic mode, on identical
 // trials. A program, not a test.
 //
-//   mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned,nocomp,warmfd]
+//   mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned,nocomp,coldfd]
 //               [--out DIR] [--seed S] [--only-trial K] [--fixed-latency S] [--latency-sweep S,S,...]
 //               [--dt S] [--horizon S] [--skip K] [--sensed] [--feedback-scale F] [--contact M,S] [--events]
 //               [--idle S]
@@ -13,8 +13,9 @@
 // policy is predicted to reach when the plan takes over, at the planning latency: the fixed one,
 // else the median of the trial's last nine), as the node's ~latency_compensation; default: the
 // task's hint (type on). Variant nocomp is iLQG without it whatever the setting: its baseline.
-// Variant warmfd is iLQG with the finite differences solved from the nominal step's solution
-// (PlannerSettings::fd_warmstart, off by default) instead of the knot's warm start.
+// Variant coldfd is iLQG with every finite-difference nudge solved from the knot's warm start
+// (mjd_transitionFD's) instead of the nominal step's solution (PlannerSettings::fd_warmstart,
+// on by default): its baseline.
 // The table's "start" column says how far each plan's starting state was from the state when it
 // took over (joint RMS, median): the prediction's error, or without it the measured state's age.
 //
@@ -131,7 +132,7 @@ struct Variant {
   bool open_loop_reference = false;  // pneumatic: the plan's tensions on each new plan only
   bool world_as_planned = false;  // the simulation runs the planning MJCF (diagnostic, see --variants)
   bool compensate = true;  // plan from the state predicted at the expected latency (latency_compensation.h)
-  bool fd_warmstart = false;  // finite-difference nudges solved from the nominal's solution (fd_derivatives.h)
+  bool fd_warmstart = true;  // finite-difference nudges solved from the nominal's solution (fd_derivatives.h)
 };
 
 struct TrialSpec {
@@ -780,7 +781,7 @@ int main(int argc, char** argv) {
     else {
       std::fprintf(stderr,
                    "usage: mpc_success [--trials N] [--tasks catch,relocate,type] "
-                   "[--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned,nocomp,warmfd] [--out DIR] [--seed S] "
+                   "[--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned,nocomp,coldfd] [--out DIR] [--seed S] "
                    "[--only-trial K] [--fixed-latency S] [--latency-sweep S,S,...] [--dt S] [--horizon S] [--skip K] [--sensed] "
                    "[--feedback-scale F] [--compensation on|off|task] "
                    "[--contact M,S] [--events] [--idle S] [--set key=number]... [--pool ilqg_key=number]...\n");
@@ -806,11 +807,11 @@ int main(int argc, char** argv) {
                                                 {"pneumatic_open", {"pneumatic_open", "ilqg", true, true, true}},
                                                 {"as_planned", {"as_planned", "ilqg", true, false, false, true}},
                                                 {"nocomp", {"nocomp", "ilqg", true, false, false, false, false}},
-                                                {"warmfd", {"warmfd", "ilqg", true, false, false, false, true, true}}};
+                                                {"coldfd", {"coldfd", "ilqg", true, false, false, false, true, false}}};
   std::vector<Variant> variants;
   for (const auto& v : split(variants_arg)) {
     if (!known.count(v)) {
-      std::fprintf(stderr, "mpc_success: unknown variant '%s' (known: ilqg, sampling, nosyn, pneumatic, pneumatic_open, as_planned, nocomp, warmfd)\n", v.c_str());
+      std::fprintf(stderr, "mpc_success: unknown variant '%s' (known: ilqg, sampling, nosyn, pneumatic, pneumatic_open, as_planned, nocomp, coldfd)\n", v.c_str());
       return 2;
     }
     variants.push_back(known.at(v));

@@ -36,9 +36,9 @@ struct PlannerSettings {
   double fd_epsilon = 1e-6;
   bool fd_centered = false;
   int derivative_skip = 3;   // finite-difference derivatives at every k-th knot, held between
-  // FD nudges solved from the nominal's solution (FdSettings::warmstart_from_nominal): off,
-  // since typing in lockstep then tapped a key unasked at rest in 4 of 10 runs (0 of 10 off).
-  bool fd_warmstart = false;
+  // FD nudges solved from the nominal's solution (FdSettings::warmstart_from_nominal): the
+  // same derivatives to the solver's precision at 0.7x the derivative time (README).
+  bool fd_warmstart = true;
   double mu_initial = 1e-6;  // LM regularisation (small: MPC must take large steps, thesis 6.4)
   double feedback_scale = 1.0;
   // predictive sampling

@@ -247,17 +247,21 @@ TEST_F(Typing, ObjectGoalsAreNotTaken) {
   EXPECT_FALSE(task->release(&why));
 }
 
+// The keypad's planning model as the node loads it for typing (type.yaml's knot spacing).
+adroit::ModelPtr typingPlanningModel() {
+  adroit_mpc::PlanningModelSettings settings;
+  settings.timestep = adroit_mpc::defaultTaskParams("type").numbers.at("planner_dt");
+  settings.contact_margin = 0.001, settings.contact_softness = 0.001;  // as the node for typing
+  return adroit_mpc::loadPlanningModel(
+      adroit::description::sceneFile(adroit_mpc::descriptionShareDir(), "keypad", true), settings);
+}
+
 // The planner integrates the keypad at its knot spacing (type.yaml planner_dt, 10 ms). A key
 // released from 5 mm down must come back up and settle, not oscillate with growing amplitude
 // (explicit spring integration: unstable once omega * dt > 2), or every plan that touches a
 // key predicts nonsense.
 TEST(TypingPlanningModel, ReleasedKeyReturnsAtThePlannerStep) {
-  const adroit_mpc::TaskParams hints = adroit_mpc::defaultTaskParams("type");
-  adroit_mpc::PlanningModelSettings settings;
-  settings.timestep = hints.numbers.at("planner_dt");
-  settings.contact_margin = 0.001, settings.contact_softness = 0.001;  // as the node for typing
-  auto model = adroit_mpc::loadPlanningModel(
-      adroit::description::sceneFile(adroit_mpc::descriptionShareDir(), "keypad", true), settings);
+  auto model = typingPlanningModel();
   // The key alone: no contacts (the hand would sink onto the keys without tension).
   model->opt.disableflags |= mjDSBL_CONTACT;
   const mjModel* m = model.get();
@@ -296,11 +300,7 @@ double lowestTipAboveKeys(const mjModel* m, const mjData* d) {
 // from there lifts them off and types nothing.
 TEST(TypingPlanningModel, IdleHandLiftsItsFingertipsOffTheKeys) {
   const adroit_mpc::TaskParams hints = adroit_mpc::defaultTaskParams("type");
-  adroit_mpc::PlanningModelSettings model_settings;
-  model_settings.timestep = hints.numbers.at("planner_dt");
-  model_settings.contact_margin = 0.001, model_settings.contact_softness = 0.001;  // as the node for typing
-  auto model = adroit_mpc::loadPlanningModel(
-      adroit::description::sceneFile(adroit_mpc::descriptionShareDir(), "keypad", true), model_settings);
+  auto model = typingPlanningModel();
   const mjModel* m = model.get();
   adroit::DataPtr sim = adroit::makeData(m);
   mj_resetDataKeyframe(m, sim.get(), mj_name2id(m, mjOBJ_KEY, "rest"));

@@ -33,7 +33,9 @@
 // planning MJCF (Table 6.1 armature and springs, pruned contacts, the planning keypad) in its
 // 2 ms steps: what the same planner does when its model is right, i.e. how much of a task's
 // shortfall is model mismatch rather than the cost or the planner.
-// --only-trial K: of the N seeded trials, run trial K alone (its traces and states are written).
+// --only-trial K: of the N seeded trials, run trial K alone (its traces and states are written);
+//   each trial gets a new simulated robot (sensor noise from its seed, nothing left over from
+//   the trial before), so with --fixed-latency this is exactly trial K of the full run.
 // --events: print each trial's task events (phase, relocation stage, keys) with their time.
 // --idle S: typing only: the hand rests over the keys S seconds, closed loop, before the
 //   sequence is given; keys registered meanwhile are typed unasked (printed, CSV `unasked`).
@@ -266,6 +268,7 @@ class TrialRunner {
     config.model_path = adroit::description::sceneFile(share, sceneOf(task), variant.world_as_planned);
     config.mode = variant.pneumatic ? adroit::driver::ActuationMode::kPneumatic : adroit::driver::ActuationMode::kForce;
     config.initial_keyframe = "rest";
+    robot_config_ = config;
     robot_ = std::make_unique<adroit::driver::SimulatedRobot>(config);
     const mjModel* m = robot_->model();
     for (int i = 0; i < m->nu; ++i) all_actuators_.push_back(static_cast<std::uint16_t>(i));
@@ -298,6 +301,10 @@ class TrialRunner {
 
   TrialResult run(const TrialSpec& spec) {
     std::string why;
+    // A new robot per trial: its sensor noise restarts from the seed and no command, valve
+    // state or watchdog state of the previous trial carries over, so a trial's outcome does
+    // not depend on the trials before it (--only-trial K reproduces trial K of a run).
+    robot_ = std::make_unique<adroit::driver::SimulatedRobot>(robot_config_);
     if (!robot_->resetToKeyframe("rest", &why)) throw std::runtime_error("reset: " + why);
     const bool has_object = task_name_ == "catch" || task_name_ == "relocate";
     if (has_object && !robot_->setObjectPose({spec.object_start.x(), spec.object_start.y(), spec.object_start.z()},
@@ -700,6 +707,7 @@ class TrialRunner {
   StatePredictor predictor_;
   bool compensation_ = false;  // the task's hint unless --compensation
   adroit::DataPtr observe_;
+  adroit::driver::SimConfig robot_config_;
   std::unique_ptr<adroit::driver::SimulatedRobot> robot_;
   std::vector<std::uint16_t> all_actuators_;
   std::vector<double> ctrl_;

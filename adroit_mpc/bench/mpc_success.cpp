@@ -59,7 +59,8 @@
 // before the trial starts, then runs closed loop for 0.3 s with the object held at its start
 // (the MPC runs before the object is released; the pools pressurise the cylinders).
 //
-// Trials (seeded; every variant sees the same ones):
+// Trials (seeded; every variant sees the same ones, paired: trial k runs under each variant in
+// turn before trial k + 1, so a change of the machine's speed falls on all variants alike):
 //   catch     bottle released 4-9 cm above the goal, +-1.5 cm sideways; 2.5 s; success: it
 //             never falls below the palm (z >= 0.2 m) and ends within 3 cm of the goal;
 //   relocate  (thesis 6.5: relocation starts as a dynamic stabilisation) the ball released
@@ -868,8 +869,20 @@ int main(int argc, char** argv) {
           break;
         }
     }
+    // Paired trials: trial k runs under every variant before trial k + 1 does, so a change in
+    // this shared machine's speed during the run falls on all variants alike (run in blocks, the
+    // variant run last would take all of a slowdown).
+    struct Tally {
+      int ok = 0, diverged = 0, keys_ok = 0, keys_all = 0, unasked = 0, unasked_trials = 0;
+      double error_sum = 0, typing_time = 0;
+      std::vector<double> plan_ms, start_errors;
+      std::array<std::vector<double>, 5> phase_ms;
+    };
+    std::vector<std::unique_ptr<TrialRunner>> runners;
+    std::vector<Tally> tallies(variants.size());
     for (const auto& variant : variants) {
-      TrialRunner runner(task, variant, overrides, contact_margin, contact_softness);
+      runners.push_back(std::make_unique<TrialRunner>(task, variant, overrides, contact_margin, contact_softness));
+      TrialRunner& runner = *runners.back();
       runner.setFixedLatency(fixed_latency);
       runner.setSensed(sensed);
       if (feedback_scale >= 0) runner.setFeedbackScale(feedback_scale);
@@ -878,11 +891,12 @@ int main(int argc, char** argv) {
       runner.setIdle(idle);
       runner.setParams(params);
       runner.setPoolParams(pool_ilqg);
-      int ok = 0, diverged = 0, keys_ok = 0, keys_all = 0, unasked = 0, unasked_trials = 0;
-      double error_sum = 0, typing_time = 0;
-      std::vector<double> plan_ms, start_errors;
-      std::array<std::vector<double>, 5> phase_ms;
-      for (const auto& spec : specs) {
+    }
+    for (const auto& spec : specs) {
+      for (std::size_t v = 0; v < variants.size(); ++v) {
+        const Variant& variant = variants[v];
+        TrialRunner& runner = *runners[v];
+        Tally& t = tallies[v];
         runner.resetTrace();
         if (print_events && task == "type")
           std::printf("%s %s trial %d: keys %s\n", task.c_str(), variant.name.c_str(), spec.index, spec.keys.c_str());
@@ -893,44 +907,49 @@ int main(int argc, char** argv) {
         const TrialResult r = runner.run(spec);
         if (print_events)
           std::printf("  end: error %.4f m%s\n", r.final_error, r.success ? " (success)" : "");
-        ok += r.success;
-        diverged += r.diverged;
-        error_sum += r.final_error;
-        keys_ok += r.keys_correct;
-        keys_all += r.keys_total;
-        unasked += r.unasked;
-        unasked_trials += r.unasked > 0;
-        typing_time += r.duration;
-        plan_ms.push_back(r.plan_ms_median);
-        start_errors.push_back(r.start_error_median);
-        for (std::size_t k = 0; k < phase_ms.size(); ++k) phase_ms[k].push_back(r.phase_ms_median[k]);
+        t.ok += r.success;
+        t.diverged += r.diverged;
+        t.error_sum += r.final_error;
+        t.keys_ok += r.keys_correct;
+        t.keys_all += r.keys_total;
+        t.unasked += r.unasked;
+        t.unasked_trials += r.unasked > 0;
+        t.typing_time += r.duration;
+        t.plan_ms.push_back(r.plan_ms_median);
+        t.start_errors.push_back(r.start_error_median);
+        for (std::size_t k = 0; k < t.phase_ms.size(); ++k) t.phase_ms[k].push_back(r.phase_ms_median[k]);
         trials_csv << task << "," << variant.name << "," << spec.index << "," << r.success << "," << r.final_error << ","
                    << (r.lowest_z > 1e8 ? 0 : r.lowest_z) << "," << r.farthest_from_grasp << "," << r.keys_correct << "," << r.keys_total << ","
                    << r.duration << "," << r.plan_ms_median << "," << r.diverged << "," << r.unasked << "\n";
         if (&spec == &specs.front()) {
-          for (const auto& [t, e] : r.trace) traces_csv << task << "," << variant.name << "," << t << "," << e << "\n";
+          for (const auto& [time, e] : r.trace) traces_csv << task << "," << variant.name << "," << time << "," << e << "\n";
           runner.writeStates(out_dir + "/states_" + task + "_" + variant.name + ".csv", r);
           runner.writeForces(out_dir + "/forces_" + task + "_" + variant.name + ".csv");
         }
         std::fflush(stdout);
       }
-      rate[task][variant.name] = static_cast<double>(ok) / specs.size();
+    }
+    for (std::size_t v = 0; v < variants.size(); ++v) {
+      const Variant& variant = variants[v];
+      const TrialRunner& runner = *runners[v];
+      const Tally& t = tallies[v];
+      rate[task][variant.name] = static_cast<double>(t.ok) / specs.size();
       if (task == "type") {
-        keys_rate[task][variant.name] = keys_all ? static_cast<double>(keys_ok) / keys_all : 0;
-        speed[task][variant.name] = typing_time > 0 ? 60.0 * keys_ok / typing_time : 0;
+        keys_rate[task][variant.name] = t.keys_all ? static_cast<double>(t.keys_ok) / t.keys_all : 0;
+        speed[task][variant.name] = t.typing_time > 0 ? 60.0 * t.keys_ok / t.typing_time : 0;
       }
-      std::printf("%-9s %-14s %5d/%-3zu %12.4f %12s %10.1f %9d %12.3f\n", task.c_str(), variant.name.c_str(), ok,
-                  specs.size(), error_sum / specs.size(),
+      std::printf("%-9s %-14s %5d/%-3zu %12.4f %12s %10.1f %9d %12.3f\n", task.c_str(), variant.name.c_str(), t.ok,
+                  specs.size(), t.error_sum / specs.size(),
                   task == "type" ? std::to_string(static_cast<int>(std::lround(speed[task][variant.name]))).c_str() : "-",
-                  adroit::percentile(plan_ms, 50), diverged, adroit::percentile(start_errors, 50));
+                  adroit::percentile(t.plan_ms, 50), t.diverged, adroit::percentile(t.start_errors, 50));
       std::printf("%-9s %-14s plan ms, table 6.2 split (median over trials): rollout %.1f, derivatives %.1f, cost %.1f, "
                   "backward %.1f, line search %.1f\n",
-                  "", "", adroit::percentile(phase_ms[0], 50), adroit::percentile(phase_ms[1], 50),
-                  adroit::percentile(phase_ms[2], 50), adroit::percentile(phase_ms[3], 50),
-                  adroit::percentile(phase_ms[4], 50));
+                  "", "", adroit::percentile(t.phase_ms[0], 50), adroit::percentile(t.phase_ms[1], 50),
+                  adroit::percentile(t.phase_ms[2], 50), adroit::percentile(t.phase_ms[3], 50),
+                  adroit::percentile(t.phase_ms[4], 50));
       if (task == "type" && idle > 0)
         std::printf("%-9s %-14s at rest for %.1f s before each sequence: %d key(s) typed unasked, in %d of %zu trials\n",
-                    "", "", idle, unasked, unasked_trials, specs.size());
+                    "", "", idle, t.unasked, t.unasked_trials, specs.size());
       if (variant.pneumatic) {
         std::printf("%-9s %-14s pools: %.2f ms per 5 ms tick for %zu cylinders (median, one core)\n", "", "",
                     1e3 * runner.poolTickMedian(), runner.cylinders());

@@ -877,6 +877,19 @@ int main(int argc, char** argv) {
       double error_sum = 0, typing_time = 0;
       std::vector<double> plan_ms, start_errors;
       std::array<std::vector<double>, 5> phase_ms;
+      void add(const TrialResult& r) {
+        ok += r.success;
+        diverged += r.diverged;
+        error_sum += r.final_error;
+        keys_ok += r.keys_correct;
+        keys_all += r.keys_total;
+        unasked += r.unasked;
+        unasked_trials += r.unasked > 0;
+        typing_time += r.duration;
+        plan_ms.push_back(r.plan_ms_median);
+        start_errors.push_back(r.start_error_median);
+        for (std::size_t k = 0; k < phase_ms.size(); ++k) phase_ms[k].push_back(r.phase_ms_median[k]);
+      }
     };
     std::vector<std::unique_ptr<TrialRunner>> runners;
     std::vector<Tally> tallies(variants.size());
@@ -896,7 +909,6 @@ int main(int argc, char** argv) {
       for (std::size_t v = 0; v < variants.size(); ++v) {
         const Variant& variant = variants[v];
         TrialRunner& runner = *runners[v];
-        Tally& t = tallies[v];
         runner.resetTrace();
         if (print_events && task == "type")
           std::printf("%s %s trial %d: keys %s\n", task.c_str(), variant.name.c_str(), spec.index, spec.keys.c_str());
@@ -907,17 +919,7 @@ int main(int argc, char** argv) {
         const TrialResult r = runner.run(spec);
         if (print_events)
           std::printf("  end: error %.4f m%s\n", r.final_error, r.success ? " (success)" : "");
-        t.ok += r.success;
-        t.diverged += r.diverged;
-        t.error_sum += r.final_error;
-        t.keys_ok += r.keys_correct;
-        t.keys_all += r.keys_total;
-        t.unasked += r.unasked;
-        t.unasked_trials += r.unasked > 0;
-        t.typing_time += r.duration;
-        t.plan_ms.push_back(r.plan_ms_median);
-        t.start_errors.push_back(r.start_error_median);
-        for (std::size_t k = 0; k < t.phase_ms.size(); ++k) t.phase_ms[k].push_back(r.phase_ms_median[k]);
+        tallies[v].add(r);
         trials_csv << task << "," << variant.name << "," << spec.index << "," << r.success << "," << r.final_error << ","
                    << (r.lowest_z > 1e8 ? 0 : r.lowest_z) << "," << r.farthest_from_grasp << "," << r.keys_correct << "," << r.keys_total << ","
                    << r.duration << "," << r.plan_ms_median << "," << r.diverged << "," << r.unasked << "\n";

@@ -24,7 +24,8 @@ constexpr int kSettleSteps = 2;
 // Realtime: how often the keep-alive re-sends the hold command between rollouts (the driver's
 // command watchdog trips after 50 ms without a command).
 constexpr double kKeepAlivePeriod = 0.01;
-// Below the simulation driver's threads (20, 19), above everything under normal scheduling.
+// Below the driver's command path (adroit_ros/realtime.h) and the trainer's roscpp threads,
+// which write what it publishes; above everything under normal scheduling.
 constexpr int kKeepAlivePriority = 10;
 // A one-shot service call that fails in transport is tried this often in all.
 constexpr int kCallAttempts = 3;
@@ -81,26 +82,34 @@ DriverConnection::~DriverConnection() {
                "its safe state",
                ns_.c_str());
   }
-  stop_.store(true);
+  {
+    std::lock_guard<PiMutex> lock(command_mutex_);
+    stop_.store(true);
+  }
+  command_cv_.notify_all();
   if (keep_alive_.joinable()) keep_alive_.join();
 }
 
 // Its own thread on wall time, so a stalled callback queue or a long update never starves it;
 // under SCHED_FIFO where permitted (it sleeps between periods), so neither does a busy machine.
+// It publishes every command of the realtime pacing: a new one at once, then again after each
+// period without one.
 void DriverConnection::keepAlive() {
   std::string why;
   if (!enterFifo(kKeepAlivePriority, &why))
     ROS_WARN_ONCE("adroit_learning: keep-alive thread under normal scheduling (%s): on a busy machine the driver's "
                   "command watchdog may trip",
                   why.c_str());
+  const auto period = std::chrono::duration<double>(kKeepAlivePeriod);
+  std::unique_lock<PiMutex> lock(command_mutex_);
   while (!stop_.load()) {
-    std::this_thread::sleep_for(std::chrono::duration<double>(kKeepAlivePeriod));
-    std::lock_guard<std::mutex> lock(command_mutex_);
-    if (hold_volts_.empty()) continue;  // nothing to hold before the streams are up
+    command_cv_.wait_for(lock, period, [&] { return send_now_ || stop_.load(); });
+    send_now_ = false;
+    if (stop_.load() || hold_volts_.empty()) continue;  // nothing to hold before the streams are up
     if (!holding_.load()) {
       const double age = std::chrono::duration<double>(std::chrono::steady_clock::now() - last_send_).count();
       if (age <= repeat_for_) {
-        publish(command_.volts);  // the rollout's latest command, freshly stamped
+        publish(latest_volts_);  // the rollout's latest command, freshly stamped
         continue;
       }
       holding_.store(true);  // the rollout stalled: hold rather than repeat a stale command
@@ -108,6 +117,16 @@ void DriverConnection::keepAlive() {
     }
     publish(hold_volts_);
   }
+}
+
+void DriverConnection::holdAt(std::vector<double> volts) {
+  {
+    std::lock_guard<PiMutex> lock(command_mutex_);
+    hold_volts_ = std::move(volts);
+    holding_.store(true);
+    send_now_ = true;
+  }
+  command_cv_.notify_one();
 }
 
 void DriverConnection::onJoints(const sensor_msgs::JointState::ConstPtr& msg) {
@@ -162,10 +181,7 @@ bool DriverConnection::waitForStreams(std::string& error) {
     if (cv_.wait_for(lock, std::chrono::duration<double>(timeout_), have)) {
       // From now on the valves are held (0 V: sealed) until a rollout commands them, so
       // neither the checks before the first reset nor the first update trip the watchdog.
-      std::lock_guard<std::mutex> command_lock(command_mutex_);
-      hold_volts_.assign(actuators_->name.size(), 0.0);
-      publish(hold_volts_);
-      holding_.store(true);
+      holdAt(std::vector<double>(actuators_->name.size(), 0.0));
       return true;
     }
     error = "driver " + ns_ + ": no joint_states / actuator_states within " + std::to_string(timeout_) +
@@ -251,12 +267,7 @@ bool DriverConnection::reset(const std::vector<double>& qpos, const std::vector<
   }
   if (pacing_ == Pacing::kRealtime) {
     reset_floor_ = ros::Time::now();  // states stamped before now may show the old state
-    {
-      std::lock_guard<std::mutex> lock(command_mutex_);
-      hold_volts_.assign(pressure.size(), hold_volts);
-      publish(hold_volts_);
-    }
-    holding_.store(true);
+    holdAt(std::vector<double>(pressure.size(), hold_volts));
     return true;
   }
   // A few physics steps on the hold command: afterwards every stream shows the reset state,
@@ -269,39 +280,40 @@ bool DriverConnection::reset(const std::vector<double>& qpos, const std::vector<
 // hand comes to rest in its passive posture, then sealed at the hold command; the rollout
 // starts from there (the initial state is measured, not set, as on the thesis's hardware).
 bool DriverConnection::resetByControl(std::size_t cylinders, double hold_volts, std::string& error) {
-  {
-    std::lock_guard<std::mutex> lock(command_mutex_);
-    hold_volts_.assign(cylinders, kExhaustVolts);
-    publish(hold_volts_);
-  }
-  holding_.store(true);
+  holdAt(std::vector<double>(cylinders, kExhaustVolts));
   ros::WallDuration(kRealResetSettle).sleep();
   if (!safe(error)) return false;
-  {
-    std::lock_guard<std::mutex> lock(command_mutex_);
-    hold_volts_.assign(cylinders, hold_volts);
-    publish(hold_volts_);
-  }
+  holdAt(std::vector<double>(cylinders, hold_volts));
   reset_floor_ = ros::Time::now();
   ++resets_by_control_;
   return true;
 }
 
 bool DriverConnection::send(const std::vector<double>& volts, std::string& error) {
-  std::lock_guard<std::mutex> lock(command_mutex_);
+  (void)error;
+  std::unique_lock<PiMutex> lock(command_mutex_);
+  if (pacing_ == Pacing::kLockstep) {
+    publish(volts);
+    return true;
+  }
+  latest_volts_ = volts;
   holding_.store(false);
   last_send_ = std::chrono::steady_clock::now();
-  publish(volts);
-  (void)error;
+  send_now_ = true;
+  lock.unlock();
+  command_cv_.notify_one();
   return true;
 }
 
 void DriverConnection::hold() {
   if (pacing_ != Pacing::kRealtime) return;
   // At once: the rollout's last command is already a control step old.
-  std::lock_guard<std::mutex> lock(command_mutex_);
-  if (!hold_volts_.empty()) publish(hold_volts_);
-  holding_.store(true);
+  {
+    std::lock_guard<PiMutex> lock(command_mutex_);
+    holding_.store(true);
+    send_now_ = true;
+  }
+  command_cv_.notify_one();
 }
 
 void DriverConnection::publish(const std::vector<double>& volts) {
@@ -320,7 +332,7 @@ void DriverConnection::publish(const std::vector<double>& volts) {
 bool DriverConnection::advance(int steps, double dt, std::string& error) {
   if (pacing_ == Pacing::kLockstep) return step(steps, error);
   {
-    std::lock_guard<std::mutex> lock(command_mutex_);
+    std::lock_guard<PiMutex> lock(command_mutex_);
     repeat_for_ = 2.0 * dt;
   }
   next_tick_ += ros::Duration(dt);

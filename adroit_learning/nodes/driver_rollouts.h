@@ -9,7 +9,9 @@
 //    command watchdog never trips while the trainer computes its update; during a rollout the
 //    rollout's latest command again (the valves hold it anyway), so a 25 Hz controller meets a
 //    50 ms watchdog with margin. A rollout command older than two control steps is not
-//    repeated: the keep-alive falls back to the hold command and counts a stall.
+//    repeated: the keep-alive falls back to the hold command and counts a stall. The keep-alive
+//    is the only thread that publishes commands (woken at once for a new one): no thread at
+//    normal scheduling holds a lock the command path needs (the shared slot is a PiMutex).
 // Resets go through `reset` (qpos in model order, pressures).
 //
 // Several drivers (backend (c): other machines under one master, each in its own namespace)
@@ -17,6 +19,7 @@
 // released here: a rollout that meets it fails and says so.
 #pragma once
 #include <adroit_core/mujoco_model.h>
+#include <adroit_core/pi_mutex.h>
 #include <adroit_learning/rollout_backend.h>
 #include <adroit_msgs/ActuatorStates.h>
 #include <adroit_msgs/ValveCommand.h>
@@ -84,6 +87,8 @@ class DriverConnection {
   bool waitForState(ros::Time min_stamp, Observation& obs, std::string& error);
   void publish(const std::vector<double>& volts);
   void keepAlive();
+  // Realtime: the valves are held at `volts` from now on (the keep-alive publishes at once).
+  void holdAt(std::vector<double> volts);
 
   std::string ns_;
   double timeout_;
@@ -104,9 +109,13 @@ class DriverConnection {
   ros::Time sim_time_, last_stamp_, reset_floor_;
   ros::Time next_tick_, last_observed_;  // realtime pacing
   int late_ticks_ = 0;
-  std::mutex command_mutex_;             // the publisher's message and stamp: rollout vs keep-alive
-  adroit_msgs::ValveCommand command_;
-  std::vector<double> hold_volts_;
+  // The command slot, rollout vs keep-alive; priority inheritance, so a rollout thread preempted
+  // while it writes cannot stall the keep-alive (SCHED_FIFO).
+  PiMutex command_mutex_;
+  std::condition_variable_any command_cv_;  // wakes the keep-alive for a new command
+  bool send_now_ = false;                   // (command_mutex_)
+  adroit_msgs::ValveCommand command_;       // the message (lockstep: the rollout; realtime: the keep-alive)
+  std::vector<double> hold_volts_, latest_volts_;  // (command_mutex_)
   std::atomic<bool> holding_{false}, stop_{false};
   std::chrono::steady_clock::time_point last_send_;  // the rollout's latest command (command_mutex_)
   double repeat_for_ = 0.1;                          // s a rollout command is repeated (command_mutex_)

@@ -10,7 +10,8 @@
 // the driver backend uses, default [/adroit]), ~workers (sim_workers threads, 0 = cores),
 // ~pacing (lockstep: the simulation driver steps when told | realtime: hardware, or a driver
 // running in real time), ~tasks_dir, ~default_output_dir, ~timeout (s, a driver's answer),
-// ~plot (write learning_curve.png after every iteration).
+// ~plot (write learning_curve.png after every iteration), ~transport_priority (realtime pacing:
+// SCHED_FIFO priority of roscpp's threads, 0 = normal scheduling; see below).
 //
 // The job runs on its own thread; callbacks only read or set its shared state, so status and
 // cancel answer while rollouts run.
@@ -23,6 +24,7 @@
 #include <adroit_msgs/TrainStatus.h>
 #include <adroit_ros/node_main.h>
 #include <adroit_ros/params.h>
+#include <adroit_ros/realtime.h>
 #include <ros/package.h>
 #include <ros/ros.h>
 #include <std_srvs/Trigger.h>
@@ -74,7 +76,7 @@ class TrainerNode {
   TrainerNode(ros::NodeHandle& nh, ros::NodeHandle& pnh) : nh_(nh) {
     rosutil::Params params(pnh);
     params.checkKeys("", {"backend", "drivers", "workers", "tasks_dir", "default_output_dir", "timeout",
-                          "plot", "pacing"});
+                          "plot", "pacing", "transport_priority"});
     backend_ = params.string("backend", "driver");
     if (backend_ != "driver" && backend_ != "sim_workers") params.fail("backend", "must be driver or sim_workers");
     drivers_ = params.strings("drivers");
@@ -83,6 +85,18 @@ class TrainerNode {
     const std::string pacing = params.string("pacing", "lockstep");
     if (pacing != "lockstep" && pacing != "realtime") params.fail("pacing", "must be lockstep or realtime");
     pacing_ = pacing == "realtime" ? learning_node::Pacing::kRealtime : learning_node::Pacing::kLockstep;
+    // roscpp writes a published message to its socket on its poll thread, not on the thread
+    // that publishes: the keep-alive's commands (SCHED_FIFO 10, driver_rollouts.cpp) leave the
+    // process only when that thread runs. Under normal scheduling it can wait 50-100 ms behind
+    // the stack's SCHED_FIFO threads (adroit_ros/realtime.h), longer than the driver's watchdog.
+    const int transport_priority = params.integer("transport_priority", 11, 0, 99);
+    if (pacing_ == learning_node::Pacing::kRealtime && transport_priority > 0) {
+      std::string error;
+      if (!rosutil::fifoRosThreads(transport_priority, &error))
+        ROS_WARN("adroit_learning: roscpp's threads keep normal scheduling (%s): on a busy machine the keep-alive's "
+                 "commands may reach the driver late and trip its watchdog",
+                 error.c_str());
+    }
     tasks_dir_ = params.string("tasks_dir", ros::package::getPath("adroit_learning") + "/config/tasks");
     if (trainingTaskNames(tasks_dir_).empty()) params.fail("tasks_dir", "no task files (*.yaml) in '" + tasks_dir_ + "'");
     const char* home = std::getenv("ROS_HOME");

@@ -22,7 +22,8 @@
 // physics 9; the driver's publisher 19, safety queue 18, roscpp threads 17; pools' input queue,
 // publisher and roscpp threads 16, glove reader and teleop's input queue and roscpp threads 16
 // (light work with deadlines: above the pools' solves), pools' tick 15; the MPC's input queue
-// and roscpp threads 12; MPC control loop 10.
+// and roscpp threads 12; MPC control loop 10; the trainer's roscpp threads 11 and keep-alive 10
+// (realtime pacing).
 #pragma once
 
 #include <atomic>

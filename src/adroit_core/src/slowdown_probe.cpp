@@ -40,6 +40,8 @@ void SlowdownProbe::run(int priority, double period) {
     if (times.size() < times.capacity()) times.push_back(t);
     next += step;
     std::this_thread::sleep_until(next);
+    const double late = std::chrono::duration<double>(std::chrono::steady_clock::now() - next).count();
+    longest_stall_ = std::max(longest_stall_, late);
   }
   for (double t : times) slowdowns_.add(t / fastest);
 }

@@ -13,6 +13,23 @@
 
 namespace {
 
+// A probe (SCHED_FIFO 1) on core 0 with `other`, so that `other`, above it, preempts it: the
+// probe's thread inherits this thread's mask while it is made.
+adroit::SlowdownProbe probeOnCoreOf(std::thread& other, double period) {
+  cpu_set_t one;
+  CPU_ZERO(&one);
+  CPU_SET(0, &one);
+  cpu_set_t before;
+  pthread_getaffinity_np(pthread_self(), sizeof before, &before);
+  pthread_setaffinity_np(pthread_self(), sizeof one, &one);
+  pthread_setaffinity_np(other.native_handle(), sizeof one, &one);
+  struct Restore {
+    cpu_set_t mask;
+    ~Restore() { pthread_setaffinity_np(pthread_self(), sizeof mask, &mask); }
+  } restore{before};
+  return adroit::SlowdownProbe(1, period);
+}
+
 TEST(FractionAbove, CountsOnlySamplesStrictlyAboveTheFactor) {
   adroit::SampleStats s;
   EXPECT_EQ(adroit::fractionAbove(s, 2.0), 0.0);
@@ -54,16 +71,7 @@ TEST(SlowdownProbe, SeesTheCoreTakenAwayForAWhile) {
       std::this_thread::sleep_for(std::chrono::microseconds(20));
     }
   });
-  // Both on the same core, so the hog preempts the probe (the probe thread inherits this mask).
-  cpu_set_t one;
-  CPU_ZERO(&one);
-  CPU_SET(0, &one);
-  cpu_set_t before;
-  pthread_getaffinity_np(pthread_self(), sizeof before, &before);
-  pthread_setaffinity_np(pthread_self(), sizeof one, &one);
-  pthread_setaffinity_np(hog.native_handle(), sizeof one, &one);
-  adroit::SlowdownProbe probe(1, 0.003);
-  pthread_setaffinity_np(pthread_self(), sizeof before, &before);
+  adroit::SlowdownProbe probe = probeOnCoreOf(hog, 0.003);
   std::this_thread::sleep_for(std::chrono::milliseconds(400));
   probe.stop();
   run = false;
@@ -72,6 +80,31 @@ TEST(SlowdownProbe, SeesTheCoreTakenAwayForAWhile) {
   EXPECT_GT(probe.slowdowns().count(), 0u) << "SCHED_FIFO refused: " << probe.refusal();
   EXPECT_GT(adroit::fractionAbove(probe.slowdowns(), 2.0), 0.25);
   EXPECT_LT(adroit::fractionAbove(probe.slowdowns(), 2.0), 0.75);  // the calm half stays calm
+}
+
+// A freeze: a thread above the probe, on its core, spins 80 ms without a pause, as when the
+// machine itself stops. The probe's work never overlaps it (no slowdown need show), but its
+// wake-up waits for the whole of it.
+TEST(SlowdownProbe, SeesAFreezeAsItsLongestStall) {
+  std::atomic<bool> spin{false};
+  std::string refused;
+  std::thread freezer([&] {
+    if (!adroit::enterFifo(2, &refused)) return;
+    while (!spin.load()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(80);
+    while (std::chrono::steady_clock::now() < until) {
+    }
+  });
+  adroit::SlowdownProbe probe = probeOnCoreOf(freezer, 0.005);
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  spin = true;
+  freezer.join();
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  probe.stop();
+  EXPECT_EQ(refused, "") << "the freezing thread could not enter SCHED_FIFO";
+  ASSERT_GT(probe.slowdowns().count(), 0u) << "SCHED_FIFO refused: " << probe.refusal();
+  EXPECT_GT(probe.longestStall(), 0.070);  // the 80 ms, less at most one period it slept anyway
+  EXPECT_LT(probe.longestStall(), 0.300);
 }
 
 }  // namespace

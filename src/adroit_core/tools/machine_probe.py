@@ -7,7 +7,15 @@ needs about one core under SCHED_FIFO; during such a brownout no priority order 
 watchdog chain fed, and the robot, correctly, goes to its safe state. A test that fails while
 the probe saw the machine run at half speed or worse for more than SLOW_FRACTION of the time
 is skipped with both the failure and the probe's figures; the same failure on a machine that
-kept its speed fails the test. An idle machine here: 0.3-0.4 % of the samples over 2x."""
+kept its speed fails the test. An idle machine here: 0.3-0.4 % of the samples over 2x.
+
+A freeze is the other way a machine trips a watchdog: its cores stop for tens of milliseconds
+(seen here with perf sched under load: a normal-priority process "ran" 33 ms on one core while
+SCHED_FIFO wake-ups on it waited, and the driver's top-priority publisher "ran" 23 ms on the
+other). A freeze shorter than the probe's period hardly shows as slowdown samples, but the
+probe's own wake-up waits for it (longest_stall_ms). A test whose chain has a known margin (a
+50 ms watchdog fed every 10 ms: 40 ms) passes it as freeze_limit_ms: a failure after the probe
+waited that long is skipped too, since no software on a frozen core meets the margin."""
 import contextlib
 import re
 import signal
@@ -43,30 +51,41 @@ class MachineProbe:
     def __init__(self):
         self.proc = subprocess.Popen(["rosrun", "adroit_core", "machine_slowdown"], stdout=subprocess.PIPE,
                                      stderr=subprocess.STDOUT, text=True)
-        self.fraction, self.summary = None, None
+        self.fraction, self.summary, self.stall_ms = None, None, 0.0
 
     def stop(self):
-        """Stops the probe once; (fraction of samples over 2x, its summary line)."""
+        """Stops the probe once; (fraction of samples over 2x, its summary line); the longest
+        stall in self.stall_ms."""
         if self.fraction is None:
             self.proc.send_signal(signal.SIGINT)
             out, _ = self.proc.communicate(timeout=20)
             found = re.search(r"slowdown_over_2x_fraction ([0-9.]+)", out)
+            stall = re.search(r"longest_stall_ms ([0-9.]+)", out)
             self.summary = out.strip().splitlines()[0] if out.strip() else "machine_slowdown printed nothing"
             self.fraction = float(found.group(1)) if found else 0.0  # no probe: no excuse
+            self.stall_ms = float(stall.group(1)) if stall else 0.0
             print(self.summary)
         return self.fraction, self.summary
 
 
 @contextlib.contextmanager
-def unless_the_machine_slowed(test, probe):
-    """Assertions inside fail the test, unless the probe saw the machine itself slow down."""
+def unless_the_machine_slowed(test, probe, freeze_limit_ms=None):
+    """Assertions inside fail the test, unless the probe saw the machine itself slow down, or
+    (given freeze_limit_ms) freeze for at least that long."""
     try:
         yield
     except AssertionError as failure:
         fraction, summary = probe.stop()
+        stall_ms = getattr(probe, "stall_ms", 0.0)
+        reason = None
         if fraction > SLOW_FRACTION:
-            reason = "the machine itself slowed down (%s: %.1f %% of the time over 2x, more than %.0f %%); " \
-                     "what failed then: %s" % (summary, 100 * fraction, 100 * SLOW_FRACTION, failure)
+            reason = "the machine itself slowed down (%s: %.1f %% of the time over 2x, more than %.0f %%)" % (
+                summary, 100 * fraction, 100 * SLOW_FRACTION)
+        elif freeze_limit_ms is not None and stall_ms >= freeze_limit_ms:
+            reason = "the machine itself froze (%s: the probe under SCHED_FIFO 99 woke %.1f ms late, at least the " \
+                     "chain's margin of %.0f ms)" % (summary, stall_ms, freeze_limit_ms)
+        if reason:
+            reason += "; what failed then: %s" % failure
             SKIPPED.append((test._testMethodName, reason))
             test.skipTest(reason)
         raise

@@ -2,6 +2,7 @@
 // ran (adroit_core/slowdown_probe.h). Runs until SIGINT/SIGTERM or --seconds, then prints the
 // summary and one line a test can parse:
 //   slowdown_over_2x_fraction <fraction of the samples that took over twice the fastest>
+//   longest_stall_ms <the longest the probe waited past a wake-up: the machine froze>
 // The real-time integration tests run it beside the judged window: a failure while the
 // machine itself ran at half speed or worse is the machine's, not the stack's.
 #include <atomic>
@@ -45,9 +46,10 @@ int main(int argc, char** argv) {
   }
   const adroit::Summary s = probe.slowdowns().summary();
   std::printf("machine_slowdown: %zu samples every %.0f ms under SCHED_FIFO %lld: median %.2f / p99 %.2f / max %.2f x "
-              "the fastest; %.1f %% of them over 2x\n",
+              "the fastest; %.1f %% of them over 2x; longest stall %.1f ms\n",
               s.count, period * 1e3, priority, s.median, s.p99, s.max,
-              100.0 * adroit::fractionAbove(probe.slowdowns(), 2.0));
+              100.0 * adroit::fractionAbove(probe.slowdowns(), 2.0), probe.longestStall() * 1e3);
   std::printf("slowdown_over_2x_fraction %.4f\n", adroit::fractionAbove(probe.slowdowns(), 2.0));
+  std::printf("longest_stall_ms %.2f\n", probe.longestStall() * 1e3);
   return 0;
 }

@@ -14,8 +14,8 @@ from machine_probe import SLOW_FRACTION, mark_probe_skips, unless_the_machine_sl
 
 
 class FakeProbe:
-    def __init__(self, fraction):
-        self.fraction, self.stops = fraction, 0
+    def __init__(self, fraction, stall_ms=0.0):
+        self.fraction, self.stall_ms, self.stops = fraction, stall_ms, 0
 
     def stop(self):
         self.stops += 1
@@ -44,6 +44,19 @@ def test_a_failure_while_the_machine_slowed_down_is_skipped_with_both_reasons():
         with unless_the_machine_slowed(Case(), probe):
             raise AssertionError("rms error 0.5 rad")
     assert "rms error 0.5 rad" in str(skipped.value) and "over 2x" in str(skipped.value)
+
+
+def test_a_freeze_skips_only_a_test_that_gave_its_margin_and_only_from_that_margin():
+    with pytest.raises(unittest.SkipTest) as skipped:
+        with unless_the_machine_slowed(Case(), FakeProbe(0.0, stall_ms=45.0), freeze_limit_ms=40):
+            raise AssertionError("watchdog tripped")
+    assert "froze" in str(skipped.value) and "45.0 ms" in str(skipped.value)
+    with pytest.raises(AssertionError, match="watchdog tripped"):  # a shorter freeze is no excuse
+        with unless_the_machine_slowed(Case(), FakeProbe(0.0, stall_ms=30.0), freeze_limit_ms=40):
+            raise AssertionError("watchdog tripped")
+    with pytest.raises(AssertionError, match="rms error"):  # no margin given: a freeze is no excuse
+        with unless_the_machine_slowed(Case(), FakeProbe(0.0, stall_ms=500.0)):
+            raise AssertionError("rms error 0.5 rad")
 
 
 def test_the_skip_is_written_into_the_result_file(tmp_path, monkeypatch):

@@ -29,6 +29,10 @@ class SlowdownProbe {
   // Slowdowns (work time / fastest work time), one per period; empty if SCHED_FIFO was refused
   // (refusal() says why). Read after stop().
   const SampleStats& slowdowns() const { return slowdowns_; }
+  // The longest the probe's thread waited past a period's wake-up (s): a freeze of the machine.
+  // Nothing in the machine preempts SCHED_FIFO 99, so that long its core ran nothing at all; a
+  // freeze shorter than the work never shows in slowdowns(). Read after stop().
+  double longestStall() const { return longest_stall_; }
   std::string refusal() const { return refusal_; }
 
  private:
@@ -36,6 +40,7 @@ class SlowdownProbe {
 
   std::atomic<bool> running_{true};
   SampleStats slowdowns_;
+  double longest_stall_ = 0;
   std::string refusal_;
   std::thread thread_;
 };

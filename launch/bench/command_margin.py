@@ -21,7 +21,7 @@ import subprocess
 import sys
 import time
 
-from stack_run import percentile, run_with_launch
+from stack_run import DriverWatch, percentile, run_with_launch
 
 VARIANTS = [("physics below the controllers (9, shipped)", 9), ("physics on top (20, before)", 20)]
 STARTUP_S = 8.0
@@ -32,27 +32,11 @@ def probe(seconds):
     releases trips; prints one JSON line."""
     import rospy
     from adroit_msgs.srv import SetObjectPose, SetObjectPoseRequest
-    from diagnostic_msgs.msg import DiagnosticArray
-    from std_srvs.srv import Trigger
 
     rospy.init_node("command_margin_probe", anonymous=True, disable_signals=True)
-    samples = []  # (command_age_max_ms, real_time_factor, watchdog_trips)
-    latest = {}
-
-    def on_diag(msg):
-        for s in msg.status:
-            if s.name == "adroit_sim":
-                values = {kv.key: kv.value for kv in s.values}
-                latest.update(values)
-                if recording[0]:
-                    samples.append((float(values["command_age_max_ms"]), float(values["real_time_factor"]),
-                                    int(values["watchdog_trips"])))
-
-    recording = [False]
-    rospy.Subscriber("/adroit/diagnostics", DiagnosticArray, on_diag, queue_size=20)
+    driver = DriverWatch()
     rospy.wait_for_service("/adroit/set_object_pose", timeout=60)
     place = rospy.ServiceProxy("/adroit/set_object_pose", SetObjectPose)
-    release = rospy.ServiceProxy("/adroit/estop_release", Trigger)
     goal = rospy.get_param("/adroit_mpc/tasks/catch/goal_position")
 
     def put(z):
@@ -62,10 +46,9 @@ def probe(seconds):
         place(request)
 
     time.sleep(STARTUP_S)
-    if latest.get("safe_state") == "true":  # tripped while a dozen processes started: not counted
-        release()
-    trips_before = int(latest.get("watchdog_trips", "0"))
-    recording[0] = True
+    if driver.in_safe_state():  # tripped while a dozen processes started: not counted
+        driver.release()
+    driver.start()
     end = time.time() + seconds
     next_drop = time.time()
     while time.time() < end:
@@ -77,11 +60,11 @@ def probe(seconds):
                 put(goal[2] + 0.07)
                 time.sleep(0.01)
             next_drop = time.time() + 3.0
-        if latest.get("safe_state") == "true" and latest.get("watchdog_latched") == "true":
-            release()
+        driver.release_trip()
         time.sleep(0.1)
-    recording[0] = False
-    trips = int(latest.get("watchdog_trips", "0")) - trips_before
+    trips = driver.stop()
+    samples = [(float(v["command_age_max_ms"]), float(v["real_time_factor"]), int(v["watchdog_trips"]))
+               for v in driver.samples]
     print(json.dumps({"samples": samples, "trips": trips}), flush=True)
 
 

@@ -40,3 +40,47 @@ def run_with_launch(launch_args, probe_args, timeout, log):
 def percentile(values, q):
     s = sorted(values)
     return s[min(len(s) - 1, int(q * len(s)))] if s else float("nan")
+
+
+class DriverWatch:
+    """In a probe: the simulation driver's diagnostics (/adroit/diagnostics, status adroit_sim).
+    Between start() and stop() each report's values are kept (one a second); release_trip()
+    releases a latched watchdog trip at once, so that each trip counts. stop() returns the trips
+    since start()."""
+
+    def __init__(self):
+        import rospy
+        from diagnostic_msgs.msg import DiagnosticArray
+        from std_srvs.srv import Trigger
+        self.latest, self.samples, self.recording, self._trips_before = {}, [], False, 0
+        rospy.Subscriber("/adroit/diagnostics", DiagnosticArray, self._on_diagnostics, queue_size=20)
+        self._release = rospy.ServiceProxy("/adroit/estop_release", Trigger)
+
+    def _on_diagnostics(self, msg):
+        for s in msg.status:
+            if s.name == "adroit_sim":
+                values = {kv.key: kv.value for kv in s.values}
+                self.latest.update(values)
+                if self.recording:
+                    self.samples.append(values)
+
+    def _trips(self):
+        return int(self.latest.get("watchdog_trips", "0"))
+
+    def start(self):
+        self._trips_before = self._trips()
+        self.recording = True
+
+    def stop(self):
+        self.recording = False
+        return self._trips() - self._trips_before
+
+    def in_safe_state(self):
+        return self.latest.get("safe_state") == "true"
+
+    def release(self):
+        self._release()
+
+    def release_trip(self):
+        if self.in_safe_state() and self.latest.get("watchdog_latched") == "true":
+            self.release()

@@ -21,7 +21,7 @@ import subprocess
 import sys
 import time
 
-from stack_run import percentile, run_with_launch
+from stack_run import DriverWatch, percentile, run_with_launch
 
 VARIANTS = [("trainer's roscpp threads FIFO 11 (shipped)", 11), ("trainer's roscpp threads normal (before)", 0)]
 ROLLOUTS = 5
@@ -32,39 +32,24 @@ def probe(iterations):
     releases trips; prints one JSON line."""
     import rospy
     from adroit_msgs.srv import Train, TrainStatus
-    from diagnostic_msgs.msg import DiagnosticArray
-    from std_srvs.srv import Trigger
 
     rospy.init_node("train_command_margin_probe", anonymous=True, disable_signals=True)
-    samples, latest, recording = [], {}, [False]
-
-    def on_diag(msg):
-        for s in msg.status:
-            if s.name == "adroit_sim":
-                values = {kv.key: kv.value for kv in s.values}
-                latest.update(values)
-                if recording[0]:
-                    samples.append(float(values["command_age_max_ms"]))
-
-    rospy.Subscriber("/adroit/diagnostics", DiagnosticArray, on_diag, queue_size=20)
+    driver = DriverWatch()
     for name in ("train", "status"):
         rospy.wait_for_service("/adroit_learning/" + name, timeout=60)
     train = rospy.ServiceProxy("/adroit_learning/train", Train)
     status = rospy.ServiceProxy("/adroit_learning/status", TrainStatus)
-    release = rospy.ServiceProxy("/adroit/estop_release", Trigger)
     out = "/tmp/train_command_margin_job_%d" % os.getpid()
     r = train(task="position_with_gravity", iterations=iterations, rollouts=ROLLOUTS, seed=3, output_dir=out)
     if not r.accepted:
         raise RuntimeError(r.message)
     time.sleep(1.0)  # the driver runs and the first hold command is in
-    trips_before = int(latest.get("watchdog_trips", "0"))
-    recording[0] = True
+    driver.start()
     while status().state == "running":
-        if latest.get("safe_state") == "true" and latest.get("watchdog_latched") == "true":
-            release()
+        driver.release_trip()
         time.sleep(0.05)
-    recording[0] = False
-    trips = int(latest.get("watchdog_trips", "0")) - trips_before
+    trips = driver.stop()
+    samples = [float(v["command_age_max_ms"]) for v in driver.samples]
     print(json.dumps({"samples": samples, "trips": trips}), flush=True)
 
 

@@ -28,6 +28,7 @@ run rosrun adroit_driver run_bench.sh ball 5 10
 ADROIT_BENCH_OUT="$WS_ROOT/log/bench/hw_latency" run rosrun adroit_driver run_hw_latency.sh 10 3
 run bash "$WS_ROOT/launch/bench/watchdog_under_load.sh" 60
 run python3 "$WS_ROOT/launch/bench/command_margin.py" --seconds 40 --blocks 2 --out "$WS_ROOT/log/bench/command_margin"
+run python3 "$WS_ROOT/launch/bench/train_command_margin.py" --iterations 3 --blocks 2 --out "$WS_ROOT/log/bench/train_command_margin"
 run python3 "$WS_ROOT/launch/bench/typing_through_node.py" --sequences 3 --out "$WS_ROOT/log/bench/typing_through_node"
 run rosrun adroit_teleop run_bench.sh --seconds 30 --out "$WS_ROOT/log/bench/teleop"
 echo "== summary =="

@@ -12,8 +12,8 @@ kept its speed fails the test. An idle machine here: 0.3-0.4 % of the samples ov
 A freeze is the other way a machine trips a watchdog: its cores stop for tens of milliseconds
 (seen here with perf sched under load: a normal-priority process "ran" 33 ms on one core while
 SCHED_FIFO wake-ups on it waited, and the driver's top-priority publisher "ran" 23 ms on the
-other). A freeze shorter than the probe's period hardly shows as slowdown samples, but the
-probe's own wake-up waits for it (longest_stall_ms). A test whose chain has a known margin (a
+other). A freeze rarely overlaps one of the probe's 50 us work samples, so it hardly shows as
+slowdown, but the probe's own wake-up waits for it (longest_stall_ms). A test whose chain has a known margin (a
 50 ms watchdog fed every 10 ms: 40 ms) passes it as freeze_limit_ms: a failure after the probe
 waited that long is skipped too, since no software on a frozen core meets the margin."""
 import contextlib

@@ -30,8 +30,9 @@ class SlowdownProbe {
   // (refusal() says why). Read after stop().
   const SampleStats& slowdowns() const { return slowdowns_; }
   // The longest the probe's thread waited past a period's wake-up (s): a freeze of the machine.
-  // Nothing in the machine preempts SCHED_FIFO 99, so that long its core ran nothing at all; a
-  // freeze shorter than the work never shows in slowdowns(). Read after stop().
+  // Hardly anything in the guest preempts SCHED_FIFO 99, so that long its core ran nothing of
+  // ours; a freeze that falls between two ~50 us work samples never shows in slowdowns().
+  // Read after stop().
   double longestStall() const { return longest_stall_; }
   std::string refusal() const { return refusal_; }
 

@@ -4,6 +4,7 @@
 
 #include <sstream>
 
+#include "adroit_core/nearest_name.h"
 #include "adroit_description/scenes.h"
 
 namespace adroit::rosutil {
@@ -79,7 +80,9 @@ void Params::checkKeys(const std::string& ns, const std::set<std::string>& allow
   if (!pnh_.getParam(ns, v)) return;
   if (v.getType() != XmlRpc::XmlRpcValue::TypeStruct) fail(ns, "expected a map");
   for (const auto& kv : v) {
-    if (!allowed.count(kv.first)) fail(ns.empty() ? kv.first : ns + "/" + kv.first, "unknown parameter");
+    if (!allowed.count(kv.first))
+      fail(ns.empty() ? kv.first : ns + "/" + kv.first,
+           "unknown parameter" + didYouMean(kv.first, std::vector<std::string>(allowed.begin(), allowed.end())));
   }
 }
 

@@ -84,7 +84,7 @@ TEST_F(ParamsTest, UnknownKeysAreRefused) {
   EXPECT_EQ(errorOf([&] { p.checkKeys("", {"rate", "ilqg"}); }), "");
   EXPECT_EQ(errorOf([&] { p.checkKeys("", {"ilqg"}); }), "bad parameter " + pnh_.getNamespace() + "/rate: unknown parameter");
   EXPECT_EQ(errorOf([&] { p.checkKeys("ilqg", {"horizon"}); }),
-            "bad parameter " + pnh_.getNamespace() + "/ilqg/horizn: unknown parameter");
+            "bad parameter " + pnh_.getNamespace() + "/ilqg/horizn: unknown parameter (did you mean horizon?)");
 }
 
 TEST_F(ParamsTest, ModelPathFromSceneOrFile) {

@@ -10,11 +10,13 @@
 #include <cstdlib>
 #include <cstring>
 #include <memory>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "adroit_core/mujoco_model.h"
+#include "adroit_core/run_program.h"
 #include "adroit_core/timing_stats.h"
 #include "adroit_description/scenes.h"
 
@@ -98,15 +100,18 @@ Row measure(const std::string& scene, const std::string& file, double seconds) {
 
 // Runs MuJoCo's testspeed sample (libmujoco-samples) on the file: the baseline.
 double testspeedStepsPerSecond(const std::string& file, long steps) {
-  const std::string cmd = "mujoco-testspeed '" + file + "' " + std::to_string(steps) + " 1 0 2>&1";
-  std::unique_ptr<FILE, int (*)(FILE*)> pipe(popen(cmd.c_str(), "r"), pclose);
-  if (!pipe) return 0;
-  char line[512];
+  adroit::ProgramOptions options;
+  options.timeout_s = 600;
+  options.capture_output = true;
+  options.merge_stderr = true;
+  const auto run = adroit::runProgram({"mujoco-testspeed", file, std::to_string(steps), "1", "0"}, options);
+  if (!run.ok()) return 0;
   double sps = 0;
-  while (std::fgets(line, sizeof(line), pipe.get())) {
-    if (const char* p = std::strstr(line, "Steps per second")) {
-      if (const char* colon = std::strchr(p, ':')) sps = std::atof(colon + 1);
-    }
+  std::istringstream lines(run.output);
+  for (std::string line; std::getline(lines, line);) {
+    const auto at = line.find("Steps per second");
+    const auto colon = at == std::string::npos ? at : line.find(':', at);
+    if (colon != std::string::npos) sps = std::atof(line.c_str() + colon + 1);
   }
   return sps;
 }

@@ -6,13 +6,20 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "adroit_core/bounded_file.h"
+
 namespace adroit {
 namespace description {
 
 std::vector<std::string> sceneNames(const std::string& share_dir) {
   const std::string path = share_dir + "/scenes.txt";
-  std::ifstream in(path);
-  if (!in) throw std::runtime_error("cannot read scene list '" + path + "'");
+  std::string text;
+  try {
+    text = adroit::readBoundedFile(path, adroit::kMiB);
+  } catch (const adroit::FileError& e) {
+    throw std::runtime_error(std::string("cannot read scene list: ") + e.what());
+  }
+  std::istringstream in(text);
   std::vector<std::string> names;
   for (std::string line; std::getline(in, line);) {
     if (!line.empty()) names.push_back(line);

@@ -8,10 +8,12 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <set>
 
 #include "adroit_core/model_tables.h"
+#include "adroit_core/run_program.h"
 #include "adroit_description/cylinders.h"
 #include "test_helpers.h"
 
@@ -246,20 +248,20 @@ struct CliRun {
   int status;
   std::string output;
 };
-CliRun runReport(const std::string& args) {
-  const std::string cmd = std::string(SCENE_REPORT_BIN) + " " + args + " 2>&1";
-  FILE* p = popen(cmd.c_str(), "r");
-  std::string out;
-  char buf[512];
-  while (p && fgets(buf, sizeof buf, p)) out += buf;
-  const int status = p ? pclose(p) : -1;
-  return {WEXITSTATUS(status), out};
+CliRun runReport(std::vector<std::string> args) {
+  args.insert(args.begin(), SCENE_REPORT_BIN);
+  adroit::ProgramOptions options;
+  options.timeout_s = 120;
+  options.capture_output = true;
+  options.merge_stderr = true;
+  const auto run = adroit::runProgram(args, options);
+  return {run.exit_code, run.output};
 }
 int lines(const std::string& s) { return static_cast<int>(std::count(s.begin(), s.end(), '\n')); }
 }  // namespace
 
 TEST(BadInput, ReportRefusesUnknownSceneWithOneLine) {
-  const CliRun r = runReport("--dir " + adroit_test::shareDir() + " --scene kitchen");
+  const CliRun r = runReport({"--dir", adroit_test::shareDir(), "--scene", "kitchen"});
   EXPECT_NE(r.status, 0);
   EXPECT_EQ(lines(r.output), 1) << r.output;
   EXPECT_NE(r.output.find("unknown scene 'kitchen'"), std::string::npos) << r.output;
@@ -269,22 +271,22 @@ TEST(BadInput, ReportQuotesMujocoOnMalformedOrMissingFile) {
   char dir[] = "/tmp/adroit_desc_test_XXXXXX";
   ASSERT_NE(mkdtemp(dir), nullptr);
   const std::string d(dir);
-  std::system(("mkdir -p " + d + "/mjcf").c_str());
+  std::filesystem::create_directories(d + "/mjcf");
   std::ofstream(d + "/scenes.txt") << "broken\nmissing\n";
   std::ofstream(d + "/mjcf/broken.xml") << "<mujoco><worldbody><body><geom type='sphere' size='x'/>";
-  CliRun r = runReport("--dir " + d + " --scene broken");
+  CliRun r = runReport({"--dir", d, "--scene", "broken"});
   EXPECT_NE(r.status, 0);
   EXPECT_EQ(lines(r.output), 1) << r.output;
   EXPECT_NE(r.output.find(d + "/mjcf/broken.xml"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("Error"), std::string::npos) << "MuJoCo's own message expected: " << r.output;
-  r = runReport("--dir " + d + " --scene missing");
+  r = runReport({"--dir", d, "--scene", "missing"});
   EXPECT_NE(r.status, 0);
   EXPECT_EQ(lines(r.output), 1) << r.output;
   EXPECT_NE(r.output.find(d + "/mjcf/missing.xml"), std::string::npos) << r.output;
-  r = runReport("--seconds -1");
+  r = runReport({"--seconds", "-1"});
   EXPECT_NE(r.status, 0);
   EXPECT_EQ(lines(r.output), 1) << r.output;
-  std::system(("rm -rf " + d).c_str());
+  std::filesystem::remove_all(d);
 }
 
 TEST(Scenes, PackageShareDirSearchesThePrefixPaths) {

@@ -12,6 +12,8 @@
 #include <GLFW/glfw3.h>
 #include <mujoco/mujoco.h>
 
+#include "adroit_core/bounded_file.h"
+
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -100,8 +102,8 @@ struct Sample {
 };
 
 std::vector<Sample> readStates(const std::string& path, std::vector<std::string>& header) {
-  std::ifstream file(path);
-  if (!file) throw std::invalid_argument("cannot read states file " + path);
+  // A states file is a few MB (an hour at 500 Hz with 30 joints is ~500 MB of CSV).
+  std::istringstream file(adroit::readBoundedFile(path, adroit::kGiB));
   std::string line;
   if (!std::getline(file, line)) throw std::invalid_argument(path + ": empty");
   header = split(line, ',');

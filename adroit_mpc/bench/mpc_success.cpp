@@ -84,6 +84,7 @@
 // force tracking per group next to the plant's floor (adroit_pneumatics ForceTrackingAudit).
 // Ends with RESULT lines (DESIGN.md section 5).
 #include <adroit_core/mujoco_model.h>
+#include <adroit_core/run_program.h>
 #include <adroit_core/timing_stats.h>
 #include <adroit_description/cylinders.h>
 #include <adroit_description/scenes.h>
@@ -1012,8 +1013,8 @@ int main(int argc, char** argv) {
 
   // plot_success.py is installed next to this program.
   const std::string script = std::filesystem::read_symlink("/proc/self/exe").parent_path() / "plot_success.py";
-  const std::string plot = "python3 \"" + script + "\" \"" + out_dir + "\"";
-  if (std::system(plot.c_str()) != 0) std::printf("\n(plotting failed: %s)\n", plot.c_str());
+  const auto plot = adroit::runProgram({"python3", script, out_dir}, adroit::ProgramOptions{});
+  if (!plot.ok()) std::printf("\n(plotting failed: %s)\n", plot.describe().c_str());
   else std::printf("\nplots: %s/success_<task>.png\n", out_dir.c_str());
 
   std::printf("\n");

@@ -9,7 +9,14 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "adroit_core/bounded_file.h"
+
 namespace adroit_mpc {
+
+namespace {
+// The largest scene in adroit_description is ~100 kB of MJCF; a file far larger is not a model.
+constexpr size_t kMaxModelFileBytes = 16 * adroit::kMiB;
+}  // namespace
 namespace {
 
 void setSoftness(mjtNum* solref, mjtNum* solimp, double softness, double timestep) {
@@ -105,11 +112,11 @@ std::string explicitContactPairsXml(const std::string& xml, const mjModel* m, in
 }
 
 std::string readModelText(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw adroit::ModelLoadError("cannot read model file " + path);
-  std::stringstream text;
-  text << in.rdbuf();
-  return text.str();
+  try {
+    return adroit::readBoundedFile(path, kMaxModelFileBytes);
+  } catch (const adroit::FileError& e) {
+    throw adroit::ModelLoadError(std::string("cannot read model file ") + e.what());
+  }
 }
 
 void applyPlanningSettings(mjModel* m, const PlanningModelSettings& s) {

@@ -3,6 +3,8 @@
 #include <adroit_description/scenes.h>
 #include <adroit_mpc/planning_model.h>
 #include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <functional>
@@ -126,6 +128,24 @@ TEST(PlanningModel, BadSettingsAreRejectedWithTheirName) {
   EXPECT_THROW(loadPlanningModel(adroit::description::sceneFile(descriptionShareDir(), "hand", true), s),
                std::invalid_argument);  // no object in the hand scene
   EXPECT_THROW(unprunedXml("<mujoco/>"), std::invalid_argument);
+}
+
+// A model path from a parameter is read only if it is a regular file: a FIFO would block the
+// MPC node's start for good, /dev/zero read without end.
+TEST(PlanningModel, ModelTextOnlyFromARegularFile) {
+  const std::string fifo = ::testing::TempDir() + "/model_fifo_" + std::to_string(getpid()) + ".xml";
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  for (const std::string& path : {fifo, std::string("/dev/zero")}) {
+    try {
+      readModelText(path);
+      ADD_FAILURE() << path << " was read";
+    } catch (const adroit::ModelLoadError& e) {
+      EXPECT_EQ(std::string(e.what()), "cannot read model file " + path + ": not a regular file (" +
+                                           (path == fifo ? "a FIFO" : "a character device") + ")");
+    }
+  }
+  unlink(fifo.c_str());
+  EXPECT_NE(readModelText(bottleFile()).find("<mujoco"), std::string::npos);
 }
 
 TEST(PlanningModel, UnprunedVariantHasMoreContactsOnceTheBottleLanded) {

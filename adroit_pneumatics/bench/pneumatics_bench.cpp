@@ -37,6 +37,7 @@
 #include <thread>
 #include <vector>
 
+#include "adroit_core/run_program.h"
 #include "adroit_core/scheduling.h"
 #include "adroit_core/slowdown_probe.h"
 #include "adroit_core/thread_pool.h"
@@ -921,9 +922,9 @@ int main(int argc, char** argv) {
   // plot_pneumatics.py is installed next to this program; it plots whichever CSV files this
   // run wrote.
   const std::string script = std::filesystem::read_symlink("/proc/self/exe").parent_path() / "plot_pneumatics.py";
-  const std::string plot = "python3 \"" + script + "\" \"" + g_out_dir + "\"";
   if (std::filesystem::exists(g_out_dir)) {
-    if (std::system(plot.c_str()) != 0) std::printf("(plotting failed: %s)\n\n", plot.c_str());
+    const auto plot = adroit::runProgram({"python3", script, g_out_dir}, adroit::ProgramOptions{});
+    if (!plot.ok()) std::printf("(plotting failed: %s)\n\n", plot.describe().c_str());
     else std::printf("plots: %s/*.png\n\n", g_out_dir.c_str());
   }
   std::printf("Summary\n");

@@ -37,6 +37,7 @@
 #include <adroit_msgs/ActuatorStates.h>
 #include <adroit_msgs/ForceReference.h>
 
+#include "adroit_core/bounded_file.h"
 #include "adroit_description/scenes.h"
 #include "adroit_pneumatics/plant.h"
 #include "adroit_pneumatics/pool.h"
@@ -132,6 +133,8 @@ int main(int argc, char** argv) {
       model_file = adroit::description::sceneFile(ros::package::getPath("adroit_description"), scene);
     const auto table = loadModelCylinders(model_file);
 
+    // A FIFO would block rosbag's open for good; a bag of a day's recording is far below this.
+    adroit::requireRegularFile(bag_path, 64 * adroit::kGiB);
     rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
     rosbag::View view(bag, rosbag::TopicQuery(std::vector<std::string>{"/adroit/actuator_states",
                                                                        "/adroit/force_reference"}));

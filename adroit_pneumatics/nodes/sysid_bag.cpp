@@ -21,6 +21,7 @@
 #include <adroit_msgs/ActuatorStates.h>
 #include <adroit_msgs/ValveCommand.h>
 
+#include "adroit_core/bounded_file.h"
 #include "adroit_description/scenes.h"
 #include "adroit_pneumatics/pool.h"
 #include "adroit_pneumatics/sysid.h"
@@ -73,6 +74,8 @@ int main(int argc, char** argv) {
     const int my_index = static_cast<int>(me - table.begin());
     const double dead = deadVolume(me->type, me->bore_diameter);
 
+    // A FIFO would block rosbag's open for good; a bag of a day's recording is far below this.
+    adroit::requireRegularFile(bag_path, 64 * adroit::kGiB);
     rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
     rosbag::View view(bag, rosbag::TopicQuery(std::vector<std::string>{"/adroit/actuator_states", "/adroit/valve_command"}));
     std::vector<Sample> states;

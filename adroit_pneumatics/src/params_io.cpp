@@ -7,6 +7,8 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include "adroit_core/bounded_file.h"
+
 namespace adroit::pneumatics {
 
 namespace {
@@ -94,11 +96,8 @@ ParameterSet parseParameterSet(const std::string& text, const std::string& sourc
 }
 
 ParameterSet loadParameterSet(const std::string& path) {
-  std::ifstream f(path);
-  if (!f) throw std::runtime_error(path + ": cannot open");
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return parseParameterSet(ss.str(), path);
+  // A parameter file is a few kB; the limit keeps a wrong path (a log, a device) from being read.
+  return parseParameterSet(adroit::readBoundedFile(path, adroit::kMiB), path);
 }
 
 std::string formatParameterSet(const ParameterSet& set) {

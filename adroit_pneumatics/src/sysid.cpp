@@ -6,6 +6,8 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "adroit_core/bounded_file.h"
+
 namespace adroit::pneumatics {
 
 ParametricInputs Recording::inputs(std::size_t k) const {
@@ -31,8 +33,8 @@ void Recording::validate() const {
 }
 
 Recording readRecordingCsv(const std::string& path) {
-  std::ifstream f(path);
-  if (!f) throw std::runtime_error("cannot open " + path);
+  // An hour of one cylinder at 1 kHz is ~200 MB of CSV: far more than any identification uses.
+  std::istringstream f(adroit::readBoundedFile(path, 256 * adroit::kMiB));
   std::string line;
   if (!std::getline(f, line) || line.rfind("t,volts,pressure,volume,volume_rate,supply", 0) != 0)
     throw std::runtime_error(path + ":1: expected header t,volts,pressure,volume,volume_rate,supply");

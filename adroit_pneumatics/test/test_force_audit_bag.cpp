@@ -1,7 +1,8 @@
 // force_tracking_audit on bags written here with the rosbag API: the RMSE it reports is the
 // error put into the bag, references are interpolated at the state stamps, and bad input
 // (no reference, a malformed reference, a missing bag) gives a clear error, not a crash.
-#include <sys/wait.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <cstdio>
@@ -16,6 +17,7 @@
 #include <adroit_msgs/ActuatorStates.h>
 #include <adroit_msgs/ForceReference.h>
 
+#include "adroit_core/run_program.h"
 #include "adroit_description/scenes.h"
 
 namespace {
@@ -29,15 +31,16 @@ struct AuditRun {
 };
 
 AuditRun audit(const std::string& bag) {
-  const std::string cmd = std::string(FORCE_AUDIT_BINARY) + " --bag " + bag + " --model " +
-                          adroit::description::sceneFile(ADROIT_DESCRIPTION_SHARE, "arm_hand") + " 2>&1";
+  adroit::ProgramOptions options;
+  options.timeout_s = 60;
+  options.capture_output = true;
+  options.merge_stderr = true;
+  const auto run = adroit::runProgram(
+      {FORCE_AUDIT_BINARY, "--bag", bag, "--model", adroit::description::sceneFile(ADROIT_DESCRIPTION_SHARE, "arm_hand")},
+      options);
   AuditRun r;
-  FILE* p = popen(cmd.c_str(), "r");
-  if (!p) return r;
-  char buf[512];
-  while (fgets(buf, sizeof buf, p)) r.out += buf;
-  const int st = pclose(p);
-  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+  r.out = run.output;
+  r.status = run.exit_code;
   return r;
 }
 
@@ -142,4 +145,16 @@ TEST(ForceAuditBag, BadInputIsAClearError) {
   const AuditRun c = audit(tempBag("no_such.bag"));
   EXPECT_EQ(c.status, 1) << c.out;
   EXPECT_NE(c.out.find("force_tracking_audit: "), std::string::npos) << c.out;
+}
+
+// A FIFO named as the bag would block rosbag's open for good: refused before it is opened
+// (audit() kills the program after its timeout, which fails the status check).
+TEST(ForceAuditBag, AFifoIsRefusedNotWaitedOn) {
+  const std::string fifo = tempBag("audit_fifo.bag");
+  unlink(fifo.c_str());
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  const AuditRun r = audit(fifo);
+  EXPECT_EQ(r.status, 1) << r.out;
+  EXPECT_NE(r.out.find(fifo + ": not a regular file (a FIFO)"), std::string::npos) << r.out;
+  unlink(fifo.c_str());
 }

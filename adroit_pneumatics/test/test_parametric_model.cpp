@@ -1,4 +1,8 @@
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <cmath>
+#include <fstream>
 
 #include <gtest/gtest.h>
 
@@ -308,4 +312,28 @@ TEST(ParamsIo, SaturatingFormRoundTripAndFieldErrors) {
   // Eq. 5.5 files without a form (all files before it existed) load as before.
   EXPECT_EQ(parseParameterSet("parametric:\n  default: {c2: 0, c3: 2, c4: 0.5, c5: 0, c6: 0, c7: 80, c8: 0.2, c9: 10, "
                               "cg: 0.3}\n").defaults.form, ParametricForm::kEq55);
+}
+
+// A parameter file named in a pool's parameters is read only if it is a regular file within
+// 1 MB: a FIFO would block the pool's start for good, a device or huge log read without end.
+TEST(ParamsIo, ParameterFileMustBeASmallRegularFile) {
+  const std::string dir = testing::TempDir() + "/params_io_" + std::to_string(getpid());
+  mkdir(dir.c_str(), 0700);
+  const std::string fifo = dir + "/fifo.yaml", big = dir + "/big.yaml";
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  std::ofstream(big) << "# " << std::string(2 * 1024 * 1024, 'x') << "\n";
+  const auto error = [](const std::string& path) {
+    try {
+      loadParameterSet(path);
+    } catch (const std::runtime_error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_EQ(error(fifo), fifo + ": not a regular file (a FIFO)");
+  EXPECT_EQ(error(dir), dir + ": not a regular file (a directory)");
+  EXPECT_EQ(error(big), big + ": 2 MB, over the limit of 1 MB");
+  unlink(fifo.c_str());
+  unlink(big.c_str());
+  rmdir(dir.c_str());
 }

@@ -1,3 +1,6 @@
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <cmath>
 #include <cstdio>
 
@@ -138,4 +141,20 @@ TEST(Sysid, RecoversSaturatingModelFromItsOwnData) {
   EXPECT_NEAR(q.e_fill, truth.e_fill, 0.05 * truth.e_fill);
   EXPECT_NEAR(q.v0, truth.v0, 0.02);
   EXPECT_LT(predictionRmse(generate(m, "random", 10.0, 3, true), ParametricModel(q)).percent, 0.2);
+}
+
+// A recording path from the command line is read only if it is a regular file: a FIFO would
+// block the identification for good, a device read without end.
+TEST(Sysid, RecordingFromAFifoOrDeviceIsRefusedWithoutReading) {
+  const std::string fifo = testing::TempDir() + "/rec_fifo_" + std::to_string(getpid());
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  for (const std::string& path : {fifo, std::string("/dev/zero"), testing::TempDir()}) {
+    try {
+      readRecordingCsv(path);
+      ADD_FAILURE() << path << " was read";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find(path + ": not a regular file"), std::string::npos) << e.what();
+    }
+  }
+  unlink(fifo.c_str());
 }

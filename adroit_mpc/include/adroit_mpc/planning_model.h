@@ -41,7 +41,8 @@ struct PlanningModelSettings {
 // scene without a body "object").
 void applyPlanningSettings(mjModel* model, const PlanningModelSettings& settings);
 
-// The MJCF text of a model file. Throws adroit::ModelLoadError when it cannot be read.
+// The MJCF text of a model file: a regular file of at most 16 MB (adroit/bounded_file.h).
+// Throws adroit::ModelLoadError, naming the file, when it cannot be read.
 std::string readModelText(const std::string& path);
 
 // Every geom pair MuJoCo 2.2.2's dynamic collision mechanism would test in `compiled` (the

@@ -24,6 +24,10 @@ const char* kindOf(mode_t mode) {
 // Closes the descriptor on every path out.
 struct Descriptor {
   int fd;
+  explicit Descriptor(int descriptor) : fd(descriptor) {}
+  Descriptor(Descriptor&& other) noexcept : fd(other.fd) { other.fd = -1; }
+  Descriptor(const Descriptor&) = delete;
+  Descriptor& operator=(const Descriptor&) = delete;
   ~Descriptor() {
     if (fd >= 0) close(fd);
   }
@@ -44,7 +48,10 @@ std::string describeBytes(size_t bytes) {
   return text;
 }
 
-std::string readBoundedFile(const std::string& path, size_t max_bytes) {
+namespace {
+
+// Opens `path` for reading if it is a regular file of at most `max_bytes`; `size` set.
+Descriptor openRegularFile(const std::string& path, size_t max_bytes, size_t& size) {
   if (path.empty()) throw FileError("no file named (empty path)");
   // O_NONBLOCK: opening a FIFO with no writer must not wait; the type is checked next.
   Descriptor file{open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC | O_NOCTTY)};
@@ -52,9 +59,23 @@ std::string readBoundedFile(const std::string& path, size_t max_bytes) {
   struct stat info {};
   if (fstat(file.fd, &info) != 0) throw FileError(path + ": cannot stat (" + std::strerror(errno) + ")");
   if (!S_ISREG(info.st_mode)) throw FileError(path + ": not a regular file (" + kindOf(info.st_mode) + ")");
-  const size_t size = static_cast<size_t>(info.st_size);
+  size = static_cast<size_t>(info.st_size);
   if (size > max_bytes)
     throw FileError(path + ": " + describeBytes(size) + ", over the limit of " + describeBytes(max_bytes));
+  return file;
+}
+
+}  // namespace
+
+size_t requireRegularFile(const std::string& path, size_t max_bytes) {
+  size_t size = 0;
+  openRegularFile(path, max_bytes, size);
+  return size;
+}
+
+std::string readBoundedFile(const std::string& path, size_t max_bytes) {
+  size_t size = 0;
+  const Descriptor file = openRegularFile(path, max_bytes, size);
   std::string text(size, '\0');
   size_t got = 0;
   // The file may change while it is read: never more than `size` bytes (the bound), and a

@@ -63,6 +63,13 @@ TEST_F(BoundedFile, NamesAMissingFile) {
   EXPECT_EQ(errorOf("", 1024), "no file named (empty path)");
 }
 
+TEST_F(BoundedFile, RequireRegularFileGivesTheSizeOrTheSameErrors) {
+  EXPECT_EQ(adroit::requireRegularFile(write("a.bag", "12345"), 5), 5u);
+  EXPECT_THROW(adroit::requireRegularFile(write("b.bag", "123456"), 5), FileError);
+  EXPECT_THROW(adroit::requireRegularFile("/dev/zero", 5), FileError);
+  EXPECT_THROW(adroit::requireRegularFile(dir_.string(), 5), FileError);
+}
+
 TEST(DescribeBytes, ReadsAsAPersonWouldSayIt) {
   EXPECT_EQ(adroit::describeBytes(12), "12 B");
   EXPECT_EQ(adroit::describeBytes(64 * adroit::kMiB), "64 MB");

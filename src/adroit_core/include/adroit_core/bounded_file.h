@@ -23,6 +23,10 @@ constexpr size_t kKiB = 1024, kMiB = 1024 * kKiB, kGiB = 1024 * kMiB;
 // FileError: "<path>: not a regular file (a FIFO)", "<path>: 3.1 GB, over the limit of 64 MB".
 std::string readBoundedFile(const std::string& path, size_t max_bytes);
 
+// For a reader that opens the file itself (a rosbag): throws FileError unless `path` is a
+// regular file of at most `max_bytes`; returns its size. Never blocks on a FIFO.
+size_t requireRegularFile(const std::string& path, size_t max_bytes);
+
 // "12 B", "3.5 kB", "64 MB": a size as a person reads it in an error message.
 std::string describeBytes(size_t bytes);
 

@@ -26,6 +26,7 @@
 //          next to this program); default learning_bench_out
 #include <adroit_core/command_line.h>
 #include <adroit_core/normal_noise.h>
+#include <adroit_core/run_program.h>
 #include <adroit_core/thread_pool.h>
 #include <adroit_core/timing_stats.h>
 #include <adroit_description/scenes.h>
@@ -254,7 +255,7 @@ int main(int argc, char** argv) {
               "%zu thread(s)\n",
               kNx, kNu, kT, kN, kHistory, pool ? pool->size() : std::size_t{1});
   NormalNoise rng(seed), sys_rng(seed + 100);
-  const SyntheticSystem system(sys_rng);
+  const SyntheticSystem synthetic(sys_rng);
   TaskCost cost_fn;
   cost_fn.q_target = Eigen::VectorXd::Zero(kNx / 2);
   for (int i = 0; i < kNx / 2; ++i) cost_fn.q_target[i] = 0.5 * sys_rng();
@@ -283,7 +284,7 @@ int main(int argc, char** argv) {
     IterationRecord rec;
     // Samples of the current controller on the synthetic system (the robot's part; not timed).
     std::vector<Rollout> samples;
-    for (int n = 0; n < kN; ++n) samples.push_back(system.rollout(controller, rng, noise_width));
+    for (int n = 0; n < kN; ++n) samples.push_back(synthetic.rollout(controller, rng, noise_width));
     double actual = 0;
     for (const Rollout& r : samples) actual += cost_fn.sample(r);
     actual /= kN;
@@ -385,8 +386,8 @@ int main(int argc, char** argv) {
   std::printf("\nwrote %s\n", csv_path.c_str());
   const std::string plotter = (std::filesystem::path(argv[0]).parent_path() / "plot_learning.py").string();
   if (std::filesystem::exists(plotter)) {
-    const std::string command = "/usr/bin/python3 '" + plotter + "' '" + out_dir + "'";
-    if (std::system(command.c_str()) != 0) std::printf("plot_learning.py failed (CSV written)\n");
+    const adroit::ProgramResult r = adroit::runProgram({"/usr/bin/python3", plotter, out_dir});
+    if (!r.ok()) std::printf("plot_learning.py failed (%s; CSV written)\n", r.describe().c_str());
   }
 
   // The requirement is on a trainer's steady state: only iterations whose GMM already sees

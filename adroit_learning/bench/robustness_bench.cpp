@@ -19,6 +19,7 @@
 // Usage: robustness_bench [--task T] [--iterations N] [--seeds S] [--widths 0,1,2,4]
 //                         [--trials N] [--train-noise L] [--noise-from I] [--workers W] [--out DIR]
 #include <adroit_core/command_line.h>
+#include <adroit_core/run_program.h>
 #include <adroit_description/scenes.h>
 #include <adroit_learning/sim_rollouts.h>
 #include <adroit_learning/trainer.h>
@@ -258,9 +259,9 @@ int main(int argc, char** argv) {
   smoothing_csv.close();
 
   const std::string script = "scripts/plot_robustness.py";
-  const std::string plot = "/usr/bin/python3 '" + adroit::description::packageShareDir("adroit_learning", script) +
-                           "/" + script + "' '" + out + "'";
-  if (std::system(plot.c_str()) != 0) std::printf("(plots not written: %s)\n", plot.c_str());
+  const adroit::ProgramResult plot = adroit::runProgram(
+      {"/usr/bin/python3", adroit::description::packageShareDir("adroit_learning", script) + "/" + script, out});
+  if (!plot.ok()) std::printf("(plots not written: %s)\n", plot.describe().c_str());
 
   const WidthSummary& white = summary.front();
   for (const auto& s : summary)

@@ -14,6 +14,7 @@
 #include <adroit_description/scenes.h>
 #include <adroit_learning/sim_rollouts.h>
 #include <adroit_learning/trainer.h>
+#include <adroit_learning/trainer_requests.h>
 
 #include <cstdio>
 #include <cstdlib>
@@ -96,10 +97,9 @@ TaskResult train(const std::string& name, const std::string& tasks_dir, const st
     ++res.iterations;
   }
   const std::string script = "scripts/plot_learning_curve.py";
-  const std::string plot = "/usr/bin/python3 '" + adroit::description::packageShareDir("adroit_learning", script) +
-                           "/" + script + "' '" + settings.output_dir + "/learning_curve.csv' '" +
-                           settings.output_dir + "/learning_curve.png' '" + name + "'";
-  if (std::system(plot.c_str()) != 0) std::printf("(plot not written: %s)\n", plot.c_str());
+  const adroit::ProgramResult plot = adroit::plotLearningCurve(
+      adroit::description::packageShareDir("adroit_learning", script) + "/" + script, settings.output_dir, name);
+  if (!plot.ok()) std::printf("(plot not written: %s)\n", plot.describe().c_str());
   return res;
 }
 

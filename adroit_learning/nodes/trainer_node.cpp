@@ -18,6 +18,7 @@
 #include <adroit_description/scenes.h>
 #include <adroit_learning/sim_rollouts.h>
 #include <adroit_learning/trainer.h>
+#include <adroit_learning/trainer_requests.h>
 #include <adroit_msgs/ExecutePolicy.h>
 #include <adroit_msgs/Train.h>
 #include <adroit_msgs/TrainProgress.h>
@@ -33,6 +34,7 @@
 
 #include <adroit_core/mujoco_model.h>
 
+#include <atomic>
 #include <cerrno>
 #include <chrono>
 #include <cstring>
@@ -136,15 +138,32 @@ class TrainerNode {
     return std::make_unique<DriverRollouts>(nh_, drivers_, loadModelFile(model_path).model, timeout_, pacing_);
   }
 
+  // Train, status, cancel and execute_policy all answer from these two (under mutex_), so they
+  // never disagree on whether the robot is busy, and with what.
   bool busy() const { return state_ == "running" || executing_; }
+  std::string busyMessage() const {
+    if (state_ == "running") return "a job is running (" + job_id_ + "); cancel it first with /adroit_learning/cancel";
+    return "execute_policy is running " + executing_path_ + "; cancel it with /adroit_learning/cancel";
+  }
+
+  // The request's counts, checked before any conversion to int (3e9 is not "not positive").
+  static std::string countsProblem(const adroit_msgs::Train::Request& req) {
+    std::string bad = countProblem("iterations", req.iterations, 1, kMaxTrainIterations);
+    if (bad.empty() && req.rollouts != 0)
+      bad = countProblem("rollouts (samples per iteration)", req.rollouts, 2, kMaxTrainRollouts);
+    if (bad.empty()) bad = countProblem("initial_state_noise_from", req.initial_state_noise_from, 0, kMaxTrainIterations);
+    return bad;
+  }
 
   bool onTrain(adroit_msgs::Train::Request& req, adroit_msgs::Train::Response& res) {
     res.accepted = false;
     std::lock_guard<std::mutex> lock(mutex_);
     if (busy()) {
-      res.message = "a job is running (" + job_id_ + "); cancel it first with /adroit_learning/cancel";
+      res.message = busyMessage();
       return true;
     }
+    res.message = countsProblem(req);
+    if (!res.message.empty()) return true;
     if (!req.demonstrations.empty()) {
       res.message = "learning from demonstrations is not available yet; leave 'demonstrations' empty";
       return true;
@@ -164,10 +183,6 @@ class TrainerNode {
     settings.smoothing_width = req.smoothing_width;
     settings.initial_state_noise = req.initial_state_noise;
     settings.initial_state_noise_from = static_cast<int>(req.initial_state_noise_from);
-    if (req.iterations == 0) {
-      res.message = "iterations must be positive";
-      return true;
-    }
     const std::string bad = validate(settings);
     if (!bad.empty()) {
       res.message = bad;
@@ -290,27 +305,33 @@ class TrainerNode {
   }
 
   void plot(const std::string& dir) {
-    // Off the callback threads (this is the job's thread); a missing matplotlib only warns.
-    const std::string cmd = "/usr/bin/python3 '" + plot_script_ + "' '" + dir + "/learning_curve.csv' '" + dir +
-                            "/learning_curve.png' >/dev/null 2>&1";
-    if (std::system(cmd.c_str()) != 0) ROS_WARN_ONCE("adroit_learning: learning_curve.png not written (%s)", cmd.c_str());
+    // Off the callback threads (this is the job's thread); a missing matplotlib only warns. An
+    // argument vector: the output directory comes from a request and is never shell text.
+    const ProgramResult r = plotLearningCurve(plot_script_, dir);
+    if (!r.ok()) ROS_WARN_ONCE("adroit_learning: %s/learning_curve.png not written (%s)", dir.c_str(), r.describe().c_str());
   }
 
   bool onStatus(adroit_msgs::TrainStatus::Request&, adroit_msgs::TrainStatus::Response& res) {
     std::lock_guard<std::mutex> lock(mutex_);
-    res.state = state_;
+    res.state = executing_ ? "executing" : state_;
     res.job_id = job_id_;
     res.iteration = iteration_;
     res.iterations = iterations_;
     res.mean_cost = mean_cost_;
     res.best_cost = best_cost_;
     res.success_rate = success_rate_;
-    res.message = message_;
+    res.message = executing_ ? "execute_policy is running " + executing_path_ : message_;
     return true;
   }
 
   bool onCancel(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
     std::lock_guard<std::mutex> lock(mutex_);
+    if (executing_) {
+      execute_cancel_ = true;
+      res.success = true;
+      res.message = "cancelling execute_policy of " + executing_path_ + " (it stops at its next control step)";
+      return true;
+    }
     if (state_ != "running") {
       res.success = false;
       res.message = "no job is running";
@@ -323,58 +344,91 @@ class TrainerNode {
     return true;
   }
 
+  // What execute_policy runs: everything a request can get wrong is found here, before the
+  // robot is claimed or a driver is touched.
+  struct Execution {
+    PolicyFile policy;
+    TrainingTask task;
+    LgController controller;  // the policy's, cut to the requested duration
+  };
+
+  Execution prepareExecution(const adroit_msgs::ExecutePolicy::Request& req) const {
+    if (!req.policy_type.empty() && req.policy_type != "tvlg")
+      throw std::runtime_error("policy_type '" + req.policy_type + "' is not available; this trainer writes tvlg");
+    const std::string bad_duration = executeDurationProblem(req.duration);
+    if (!bad_duration.empty()) throw std::runtime_error(bad_duration);
+    Execution e;
+    e.policy = readPolicyFile(req.policy_path);  // regular files only, bounded
+    e.task = findTrainingTask(tasks_dir_, e.policy.task);
+    if (std::abs(e.task.control_dt - e.policy.control_dt) > 1e-12)
+      throw std::runtime_error(req.policy_path + ": control_dt " + std::to_string(e.policy.control_dt) + " s, task '" +
+                               e.task.name + "' now has " + std::to_string(e.task.control_dt) + " s");
+    const LgController& full = e.policy.controller;
+    e.task.horizon = executeHorizon(full.horizon(), e.task.control_dt, req.duration);
+    e.controller = LgController(full.nx(), full.nu(), e.task.horizon);
+    for (int t = 0; t < e.task.horizon; ++t) {
+      e.controller.K[t] = full.K[t];
+      e.controller.k[t] = full.k[t];
+      e.controller.setCovariance(t, full.covariance(t));
+    }
+    return e;
+  }
+
+  // One rollout of the policy's mean on the driver; the message of a success.
+  std::string execute(const std::string& path, Execution& e, double& final_cost) {
+    TrainingTask& task = e.task;
+    std::unique_ptr<RolloutBackend> backend = makeBackend(task, "driver");  // always on the robot
+    const StateLayout layout(task, backend->jointNames(), backend->cylinderNames(), backend->hasObject());
+    const std::string mismatch =
+        policyMismatch(e.policy, path, layout.joint_names, layout.cylinder_names, layout.describe());
+    if (!mismatch.empty()) throw std::runtime_error(mismatch);
+    const TrajectoryCost cost(task, layout, backend->initialState(task, layout));
+    const RolloutRequest mean{Eigen::MatrixXd::Zero(layout.nu(), task.horizon), {}};
+    const std::vector<RolloutResult> results = backend->run(task, layout, e.controller, {mean}, execute_cancel_);
+    if (!results.front().ok) throw std::runtime_error("rollout failed: " + results.front().error);
+    const TaskOutcome outcome = cost.outcome(results.front().sample);
+    final_cost = outcome.cost;
+    char text[200];
+    std::snprintf(text, sizeof(text), "ran %d steps of %s: cost %.4g, joint rms %.3f rad%s", task.horizon,
+                  task.name.c_str(), outcome.cost, outcome.joint_rms, outcome.success ? ", success" : "");
+    return text;
+  }
+
   bool onExecute(adroit_msgs::ExecutePolicy::Request& req, adroit_msgs::ExecutePolicy::Response& res) {
     res.success = false;
     res.final_cost = std::numeric_limits<double>::quiet_NaN();
     {
       std::lock_guard<std::mutex> lock(mutex_);
       if (busy()) {
-        res.message = "a job is running (" + job_id_ + "); the robot is busy";
+        res.message = busyMessage();
+        return true;
+      }
+    }
+    Execution e;
+    try {
+      e = prepareExecution(req);
+    } catch (const std::exception& error) {  // refused: nothing claimed, no driver touched
+      res.message = error.what();
+      ROS_WARN("adroit_learning: execute_policy %s refused: %s", req.policy_path.c_str(), error.what());
+      return true;
+    }
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (busy()) {
+        res.message = busyMessage();
         return true;
       }
       executing_ = true;
+      executing_path_ = req.policy_path;
+      execute_cancel_ = false;
     }
     try {
-      if (!req.policy_type.empty() && req.policy_type != "tvlg")
-        throw std::runtime_error("policy_type '" + req.policy_type + "' is not available; this trainer writes tvlg");
-      const PolicyFile policy = readPolicyFile(req.policy_path);
-      TrainingTask task = findTrainingTask(tasks_dir_, policy.task);
-      if (std::abs(task.control_dt - policy.control_dt) > 1e-12)
-        throw std::runtime_error(req.policy_path + ": control_dt " + std::to_string(policy.control_dt) +
-                                 " s, task '" + task.name + "' now has " + std::to_string(task.control_dt) + " s");
-      task.horizon = policy.controller.horizon();
-      if (req.duration > 0) task.horizon = std::min(task.horizon, static_cast<int>(std::ceil(req.duration / task.control_dt)));
-      std::unique_ptr<RolloutBackend> backend = makeBackend(task, "driver");  // always on the robot
-      const StateLayout layout(task, backend->jointNames(), backend->cylinderNames(), backend->hasObject());
-      const std::string mismatch = policyMismatch(policy, req.policy_path, layout.joint_names, layout.cylinder_names,
-                                                  layout.describe());
-      if (!mismatch.empty()) throw std::runtime_error(mismatch);
-      LgController controller = policy.controller;
-      if (task.horizon < controller.horizon()) {
-        LgController shorter(controller.nx(), controller.nu(), task.horizon);
-        for (int t = 0; t < task.horizon; ++t) {
-          shorter.K[t] = controller.K[t];
-          shorter.k[t] = controller.k[t];
-          shorter.setCovariance(t, controller.covariance(t));
-        }
-        controller = std::move(shorter);
-      }
-      const TrajectoryCost cost(task, layout, backend->initialState(task, layout));
-      const std::atomic<bool> no_cancel{false};
-      const RolloutRequest mean{Eigen::MatrixXd::Zero(layout.nu(), task.horizon), {}};
-      const std::vector<RolloutResult> results = backend->run(task, layout, controller, {mean}, no_cancel);
-      if (!results.front().ok) throw std::runtime_error("rollout failed: " + results.front().error);
-      const TaskOutcome outcome = cost.outcome(results.front().sample);
+      res.message = execute(req.policy_path, e, res.final_cost);
       res.success = true;
-      res.final_cost = outcome.cost;
-      char text[200];
-      std::snprintf(text, sizeof(text), "ran %d steps of %s: cost %.4g, joint rms %.3f rad%s", task.horizon,
-                    task.name.c_str(), outcome.cost, outcome.joint_rms, outcome.success ? ", success" : "");
-      res.message = text;
-      ROS_INFO("adroit_learning: execute_policy %s: %s", req.policy_path.c_str(), text);
-    } catch (const std::exception& e) {
-      res.message = e.what();
-      ROS_WARN("adroit_learning: execute_policy %s refused: %s", req.policy_path.c_str(), e.what());
+      ROS_INFO("adroit_learning: execute_policy %s: %s", req.policy_path.c_str(), res.message.c_str());
+    } catch (const std::exception& error) {
+      res.message = error.what();
+      ROS_WARN("adroit_learning: execute_policy %s failed: %s", req.policy_path.c_str(), error.what());
     }
     std::lock_guard<std::mutex> lock(mutex_);
     executing_ = false;
@@ -399,6 +453,8 @@ class TrainerNode {
   double mean_cost_ = std::numeric_limits<double>::quiet_NaN(), best_cost_ = std::numeric_limits<double>::quiet_NaN();
   double success_rate_ = 0;
   bool cancel_requested_ = false, executing_ = false;
+  std::string executing_path_;
+  std::atomic<bool> execute_cancel_{false};  // read by the execute rollout without mutex_
 };
 
 }  // namespace adroit::learning_node

@@ -154,7 +154,7 @@ double klDivergence(const LgController& p, const LgController& q, const Trajecto
   });
   double kl = 0;
   for (double v : step_kl) kl += v;
-  return std::max(0.0, kl);  // rounding can leave -1e-16
+  return kl < 0 ? 0.0 : kl;  // rounding can leave -1e-16; a NaN (overflow) stays NaN
 }
 
 KlUpdate::KlUpdate(int nx, int nu, int horizon)
@@ -331,13 +331,21 @@ KlUpdateResult KlUpdate::update(const LgDynamics& dyn, const QuadraticCost& cost
   // the last one solved at all.
   KlUpdateResult current, best, last;
   bool have_best = false, have_last = false;
+  int not_definite = 0, non_finite = 0;  // failed evaluations, by cause
   for (int it = 1; it <= s.max_iterations; ++it) {
     const bool ok = solveLoaded(cost, true, eta, current.controller, s.pool);
     double kl = std::numeric_limits<double>::infinity();
     if (ok) {
       forwardMarginals(dyn, current.controller, marginals_, s.pool);
       kl = klDivergence(current.controller, prev, marginals_, s.pool);
-      if (!std::isfinite(kl)) kl = std::numeric_limits<double>::infinity();
+      current.predicted_cost = expectedCost(cost, marginals_);
+      // An overflow (huge but finite inputs) is a failed evaluation, never a KL of 0.
+      if (!std::isfinite(kl) || !std::isfinite(current.predicted_cost)) {
+        kl = std::numeric_limits<double>::infinity();
+        ++non_finite;
+      }
+    } else {
+      ++not_definite;
     }
     const double log_eta = std::log(eta), log_kl = std::log(std::max(kl, 1e-300));
     if (std::isfinite(kl)) {
@@ -349,7 +357,6 @@ KlUpdateResult KlUpdate::update(const LgDynamics& dyn, const QuadraticCost& cost
       current.kl_slope = slope;
       current.eta = eta;
       current.kl = kl;
-      current.predicted_cost = expectedCost(cost, marginals_);
       current.iterations = it;
       const bool in_band = std::abs(kl - epsilon) <= s.tolerance * epsilon;
       const bool slack = kl < epsilon && eta <= s.eta_min;
@@ -398,7 +405,9 @@ KlUpdateResult KlUpdate::update(const LgDynamics& dyn, const QuadraticCost& cost
   if (have_best) return best;  // not converged, but inside the constraint
   if (have_last) return last;  // not converged: KL above epsilon even at the largest eta tried
   throw std::runtime_error("KlUpdate::update: no eta in [" + std::to_string(s.eta_min) + ", " +
-                           std::to_string(s.eta_max) + "] gives a positive definite Q_uu");
+                           std::to_string(s.eta_max) + "] gives an update: Q_uu not positive definite at " +
+                           std::to_string(not_definite) + " etas, KL or expected cost not finite at " +
+                           std::to_string(non_finite) + " (overflow: are the dynamics or costs too large?)");
 }
 
 double adjustEpsilon(double epsilon, double previous_expected, double predicted, double previous_actual,

@@ -1,41 +1,73 @@
 #include "adroit_learning/matrix_file.h"
 
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
-#include <sstream>
 
 namespace adroit {
 
 namespace {
 
-// Whitespace-separated tokens with their line numbers, comments removed.
-struct Token {
-  std::string text;
-  int line;
-};
-
-std::vector<Token> tokenize(const std::string& text) {
-  std::vector<Token> tokens;
-  std::istringstream in(text);
-  std::string line;
-  for (int number = 1; std::getline(in, line); ++number) {
-    const size_t hash = line.find('#');
-    if (hash != std::string::npos) line.resize(hash);
-    std::istringstream words(line);
-    std::string word;
-    while (words >> word) tokens.push_back({word, number});
+// Whitespace-separated tokens of a text with their line numbers, comments skipped. Reads in
+// place: a file costs its text and its blocks, not a string per number.
+class Tokens {
+ public:
+  explicit Tokens(const std::string& text) : text_(text) {}
+  // The next token, or false at the end of the text.
+  bool next(std::string& token, int& line) {
+    while (pos_ < text_.size()) {
+      const char c = text_[pos_];
+      if (c == '#') {
+        while (pos_ < text_.size() && text_[pos_] != '\n') ++pos_;
+      } else if (std::isspace(static_cast<unsigned char>(c))) {
+        if (c == '\n') ++line_;
+        ++pos_;
+      } else {
+        break;
+      }
+    }
+    if (pos_ >= text_.size()) return false;
+    const size_t begin = pos_;
+    while (pos_ < text_.size() && !std::isspace(static_cast<unsigned char>(text_[pos_])) && text_[pos_] != '#') ++pos_;
+    token.assign(text_, begin, pos_ - begin);
+    line = line_;
+    return true;
   }
-  return tokens;
-}
+  size_t bytesLeft() const { return text_.size() - pos_; }
+
+ private:
+  const std::string& text_;
+  size_t pos_ = 0;
+  int line_ = 1;
+};
 
 bool parseInt(const std::string& s, long& out) {
   char* end = nullptr;
   errno = 0;
   out = std::strtol(s.c_str(), &end, 10);
   return errno == 0 && end != s.c_str() && *end == '\0';
+}
+
+bool isNumber(const std::string& s) {
+  char* end = nullptr;
+  std::strtod(s.c_str(), &end);
+  return end != s.c_str() && *end == '\0';
+}
+
+// Why a header does not parse, naming the block it belongs to: a number where a header should
+// start is the previous block's surplus, so that block is the one named.
+std::string badHeader(const std::string& name, int line, const std::string& head, const std::string& previous,
+                      const std::string& previous_shape) {
+  const std::string at = name + ":" + std::to_string(line) + ": ";
+  if (!isNumber(head))
+    return at + "block '" + head + "': the header must be '<name> <rows> <cols>' with integer rows and cols";
+  if (previous.empty())
+    return at + "the number '" + head + "' where the first block header '<name> <rows> <cols>' should be";
+  return at + "block '" + previous + "' (" + previous_shape + "): the number '" + head +
+         "' follows its last number where the next header should be (more numbers than its shape?)";
 }
 
 }  // namespace
@@ -45,47 +77,53 @@ void MatrixFile::fail(const std::string& block, const std::string& problem) cons
 }
 
 MatrixFile MatrixFile::read(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw MatrixFileError(path + ": cannot open for reading");
-  std::ostringstream text;
-  text << in.rdbuf();
-  if (in.bad()) throw MatrixFileError(path + ": read error");
-  return parse(text.str(), path);
+  try {
+    return parse(readBoundedFile(path, kMaxMatrixFileBytes), path);
+  } catch (const FileError& e) {
+    throw MatrixFileError(e.what());
+  }
 }
 
 MatrixFile MatrixFile::parse(const std::string& text, const std::string& name) {
   MatrixFile file(name);
-  const std::vector<Token> tokens = tokenize(text);
-  size_t i = 0;
-  while (i < tokens.size()) {
-    const Token& head = tokens[i];
-    const std::string where = name + ":" + std::to_string(head.line) + ": block '" + head.text + "': ";
+  Tokens tokens(text);
+  std::string head, rows_text, cols_text, number, previous, previous_shape;
+  int line = 0, unused = 0;
+  while (tokens.next(head, line)) {
+    const std::string where = name + ":" + std::to_string(line) + ": block '" + head + "': ";
     long rows = 0, cols = 0;
-    if (i + 2 >= tokens.size() || !parseInt(tokens[i + 1].text, rows) || !parseInt(tokens[i + 2].text, cols))
-      throw MatrixFileError(where + "the header must be '<name> <rows> <cols>' with integer rows and cols");
-    if (rows <= 0 || cols <= 0 || rows > 100000 || cols > 100000)
+    const bool complete = tokens.next(rows_text, unused) && tokens.next(cols_text, unused);
+    if (isNumber(head) || !complete || !parseInt(rows_text, rows) || !parseInt(cols_text, cols))
+      throw MatrixFileError(badHeader(name, line, head, previous, previous_shape));
+    if (rows <= 0 || cols <= 0 || rows > kMaxMatrixDimension || cols > kMaxMatrixDimension)
       throw MatrixFileError(where + "shape " + std::to_string(rows) + "x" + std::to_string(cols) +
-                            " is not positive (or absurdly large)");
-    if (file.has(head.text)) throw MatrixFileError(where + "appears twice");
-    i += 3;
-    Eigen::MatrixXd m(rows, cols);
+                            " is not positive (or over " + std::to_string(kMaxMatrixDimension) + " per side)");
+    if (file.has(head)) throw MatrixFileError(where + "appears twice");
+    // Each number takes at least 2 bytes (a digit and a separator): checked before allocating.
     const long count = rows * cols;
-    for (long n = 0; n < count; ++n, ++i) {
-      if (i >= tokens.size())
+    if (static_cast<size_t>(count) > tokens.bytesLeft() / 2 + 1)
+      throw MatrixFileError(where + "shape " + std::to_string(rows) + "x" + std::to_string(cols) + " needs " +
+                            std::to_string(count) + " numbers, more than the " +
+                            std::to_string(tokens.bytesLeft()) + " bytes after its header can hold");
+    Eigen::MatrixXd m(rows, cols);
+    for (long n = 0; n < count; ++n) {
+      int number_line = 0;
+      if (!tokens.next(number, number_line))
         throw MatrixFileError(where + "the file ends after " + std::to_string(n) + " of its " +
                               std::to_string(count) + " numbers");
-      const Token& tok = tokens[i];
       char* end = nullptr;
-      const double v = std::strtod(tok.text.c_str(), &end);
+      const double v = std::strtod(number.c_str(), &end);
       const std::string entry = "entry (" + std::to_string(n / cols) + ", " + std::to_string(n % cols) + ") on line " +
-                                std::to_string(tok.line);
-      if (end == tok.text.c_str() || *end != '\0')
-        throw MatrixFileError(where + entry + " is not a number: '" + tok.text + "'" +
+                                std::to_string(number_line);
+      if (end == number.c_str() || *end != '\0')
+        throw MatrixFileError(where + entry + " is not a number: '" + number + "'" +
                               (n == 0 ? "" : " (too few numbers for the shape?)"));
-      if (!std::isfinite(v)) throw MatrixFileError(where + entry + " is not finite: '" + tok.text + "'");
+      if (!std::isfinite(v)) throw MatrixFileError(where + entry + " is not finite: '" + number + "'");
       m(n / cols, n % cols) = v;
     }
-    file.set(head.text, m);
+    file.set(head, m);
+    previous = head;
+    previous_shape = std::to_string(rows) + "x" + std::to_string(cols);
   }
   return file;
 }
@@ -138,66 +176,111 @@ void MatrixFile::set(const std::string& block, const Eigen::MatrixXd& value) {
   blocks_.emplace_back(block, value);
 }
 
-namespace {
-
-void readDims(const MatrixFile& file, int& nx, int& nu, int& horizon) {
+MatrixDims readDims(const MatrixFile& file) {
   const Eigen::MatrixXd& d = file.get("dims", 1, 3);
+  const double limits[3] = {kMaxMatrixDimension, kMaxMatrixDimension, kMaxHorizon};
   for (int i = 0; i < 3; ++i)
-    if (d(0, i) < 1 || d(0, i) != std::floor(d(0, i)) || d(0, i) > 1e6)
-      throw MatrixFileError(file.name() + ": block 'dims': nx, nu and T must be positive integers");
-  nx = static_cast<int>(d(0, 0));
-  nu = static_cast<int>(d(0, 1));
-  horizon = static_cast<int>(d(0, 2));
+    if (!(d(0, i) >= 1 && d(0, i) <= limits[i]) || d(0, i) != std::floor(d(0, i)))
+      throw MatrixFileError(file.name() + ": block 'dims': nx, nu and T must be whole numbers in [1, " +
+                            std::to_string(kMaxMatrixDimension) + "] (T: [1, " + std::to_string(kMaxHorizon) +
+                            "]), got " + std::to_string(d(0, 0)) + " " + std::to_string(d(0, 1)) + " " +
+                            std::to_string(d(0, 2)));
+  return {static_cast<int>(d(0, 0)), static_cast<int>(d(0, 1)), static_cast<int>(d(0, 2))};
 }
+
+std::string covarianceProblem(const Eigen::MatrixXd& m) {
+  if (m.rows() != m.cols()) return "not square";
+  const double scale = m.cwiseAbs().maxCoeff(), tolerance = 1e-9 * scale;
+  Eigen::Index r = 0, c = 0;
+  const double asymmetry = (m - m.transpose()).cwiseAbs().maxCoeff(&r, &c);
+  if (asymmetry > tolerance)
+    return "not symmetric: entries (" + std::to_string(r) + ", " + std::to_string(c) + ") and (" + std::to_string(c) +
+           ", " + std::to_string(r) + ") differ by " + std::to_string(asymmetry);
+  // Pivoted LDLT: a semi-definite matrix has no pivot below zero (beyond rounding).
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt(m);
+  const double pivot = ldlt.vectorD().minCoeff();
+  if (ldlt.info() != Eigen::Success || pivot < -tolerance)
+    return "not positive semi-definite: its LDLT factorisation has the pivot " + std::to_string(pivot);
+  return "";
+}
+
+namespace {
 
 Eigen::MatrixXd dimsBlock(int nx, int nu, int horizon) {
   return (Eigen::MatrixXd(1, 3) << nx, nu, horizon).finished();
 }
 
+struct StepBlock {
+  const char* base;
+  int rows, cols, extra_steps;  // extra_steps: 1 for blocks with a terminal step T
+};
+
+// Every per-step block exists with its shape, checked before anything of the horizon's size is
+// allocated: a dims block's T cannot claim more memory than the file's own blocks hold.
+void requireSteps(const MatrixFile& file, int horizon, std::initializer_list<StepBlock> blocks) {
+  std::size_t needed = 0;
+  for (const auto& b : blocks) needed += static_cast<std::size_t>(horizon + b.extra_steps);
+  if (needed > file.blockCount())
+    throw MatrixFileError(file.name() + ": T = " + std::to_string(horizon) + " needs " + std::to_string(needed) +
+                          " per-step blocks, the file has " + std::to_string(file.blockCount()) + " blocks in all");
+  for (const auto& b : blocks)
+    for (int t = 0; t < horizon + b.extra_steps; ++t) file.get(MatrixFile::stepName(b.base, t), b.rows, b.cols);
+}
+
+void requireCovariance(const MatrixFile& file, const std::string& block) {
+  const std::string problem = covarianceProblem(file.get(block));
+  if (!problem.empty()) throw MatrixFileError(file.name() + ": block '" + block + "': " + problem);
+}
+
 }  // namespace
 
 LgDynamics readDynamics(const MatrixFile& file) {
-  int nx, nu, T;
-  readDims(file, nx, nu, T);
+  const auto [nx, nu, T] = readDims(file);
+  file.get("x0_mean", nx, 1);
+  file.get("x0_cov", nx, nx);
+  requireSteps(file, T, {{"Fx", nx, nx, 0}, {"Fu", nx, nu, 0}, {"f", nx, 1, 0}, {"Sigma", nx, nx, 0}});
+  requireCovariance(file, "x0_cov");
+  for (int t = 0; t < T; ++t) requireCovariance(file, MatrixFile::stepName("Sigma", t));
   LgDynamics d(nx, nu, T);
-  d.x0_mean = file.get("x0_mean", nx, 1);
-  d.x0_cov = file.get("x0_cov", nx, nx);
+  d.x0_mean = file.get("x0_mean");
+  d.x0_cov = file.get("x0_cov");
   for (int t = 0; t < T; ++t) {
-    d.Fx[t] = file.get(MatrixFile::stepName("Fx", t), nx, nx);
-    d.Fu[t] = file.get(MatrixFile::stepName("Fu", t), nx, nu);
-    d.f[t] = file.get(MatrixFile::stepName("f", t), nx, 1);
-    d.Sigma[t] = file.get(MatrixFile::stepName("Sigma", t), nx, nx);
+    d.Fx[t] = file.get(MatrixFile::stepName("Fx", t));
+    d.Fu[t] = file.get(MatrixFile::stepName("Fu", t));
+    d.f[t] = file.get(MatrixFile::stepName("f", t));
+    d.Sigma[t] = file.get(MatrixFile::stepName("Sigma", t));
   }
   return d;
 }
 
 QuadraticCost readCost(const MatrixFile& file, int nx, int nu, int T) {
+  requireSteps(file, T, {{"cxx", nx, nx, 1}, {"cx", nx, 1, 1}, {"cuu", nu, nu, 0}, {"cux", nu, nx, 0}, {"cu", nu, 1, 0}});
   QuadraticCost c(nx, nu, T);
   for (int t = 0; t <= T; ++t) {
-    c.cxx[t] = file.get(MatrixFile::stepName("cxx", t), nx, nx);
-    c.cx[t] = file.get(MatrixFile::stepName("cx", t), nx, 1);
+    c.cxx[t] = file.get(MatrixFile::stepName("cxx", t));
+    c.cx[t] = file.get(MatrixFile::stepName("cx", t));
     if (t == T) break;
-    c.cuu[t] = file.get(MatrixFile::stepName("cuu", t), nu, nu);
-    c.cux[t] = file.get(MatrixFile::stepName("cux", t), nu, nx);
-    c.cu[t] = file.get(MatrixFile::stepName("cu", t), nu, 1);
+    c.cuu[t] = file.get(MatrixFile::stepName("cuu", t));
+    c.cux[t] = file.get(MatrixFile::stepName("cux", t));
+    c.cu[t] = file.get(MatrixFile::stepName("cu", t));
   }
   return c;
 }
 
 LgController readController(const MatrixFile& file, int nx, int nu, int T) {
-  int fnx, fnu, fT;
-  readDims(file, fnx, fnu, fT);
-  if (fnx != nx || fnu != nu || fT != T)
-    throw MatrixFileError(file.name() + ": block 'dims': the controller is nx=" + std::to_string(fnx) + " nu=" +
-                          std::to_string(fnu) + " T=" + std::to_string(fT) + ", the dynamics nx=" +
+  const MatrixDims dims = readDims(file);
+  if (dims.nx != nx || dims.nu != nu || dims.horizon != T)
+    throw MatrixFileError(file.name() + ": block 'dims': the controller is nx=" + std::to_string(dims.nx) + " nu=" +
+                          std::to_string(dims.nu) + " T=" + std::to_string(dims.horizon) + ", the dynamics nx=" +
                           std::to_string(nx) + " nu=" + std::to_string(nu) + " T=" + std::to_string(T));
+  requireSteps(file, T, {{"K", nu, nx, 0}, {"k", nu, 1, 0}, {"C", nu, nu, 0}});
   LgController c(nx, nu, T);
   for (int t = 0; t < T; ++t) {
-    c.K[t] = file.get(MatrixFile::stepName("K", t), nu, nx);
-    c.k[t] = file.get(MatrixFile::stepName("k", t), nu, 1);
+    c.K[t] = file.get(MatrixFile::stepName("K", t));
+    c.k[t] = file.get(MatrixFile::stepName("k", t));
     const std::string name = MatrixFile::stepName("C", t);
     try {
-      c.setCovariance(t, file.get(name, nu, nu));
+      c.setCovariance(t, file.get(name));
     } catch (const std::invalid_argument&) {
       throw MatrixFileError(file.name() + ": block '" + name + "': not a symmetric positive definite covariance");
     }

@@ -1,11 +1,13 @@
 #include "adroit_learning/policy_file.h"
 
+#include <adroit_core/bounded_file.h>
+
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <fcntl.h>
-#include <fstream>
 #include <map>
 #include <sstream>
 #include <unistd.h>
@@ -41,6 +43,15 @@ std::string firstDifference(const std::vector<std::string>& file, const std::vec
   for (std::size_t i = 0; i < std::min(file.size(), robot.size()); ++i)
     if (file[i] != robot[i]) return "entry " + std::to_string(i) + " is '" + file[i] + "' where the robot has '" + robot[i] + "'";
   return std::to_string(file.size()) + " entries where the robot has " + std::to_string(robot.size());
+}
+
+// The line at `pos` (without its newline), advancing `pos` past it; false at the end.
+bool nextLine(const std::string& text, std::size_t& pos, std::string& line) {
+  if (pos >= text.size()) return false;
+  const std::size_t end = std::min(text.find('\n', pos), text.size());
+  line.assign(text, pos, end - pos);
+  pos = end + 1;
+  return true;
 }
 
 }  // namespace
@@ -93,10 +104,15 @@ void writePolicyFile(const std::string& path, const PolicyFile& p) {
 }
 
 PolicyFile readPolicyFile(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw PolicyFileError(path + ": cannot open: " + std::strerror(errno));
+  std::string text;
+  try {
+    text = readBoundedFile(path, kMaxPolicyFileBytes);
+  } catch (const FileError& e) {
+    throw PolicyFileError(e.what());
+  }
+  std::size_t pos = 0;  // of the next line in `text` (no copy of it: it can be large)
   std::string line;
-  if (!std::getline(in, line)) throw PolicyFileError(path + ": empty file");
+  if (!nextLine(text, pos, line)) throw PolicyFileError(path + ": empty file");
   {
     std::istringstream first(line);
     std::string magic;
@@ -109,7 +125,7 @@ PolicyFile readPolicyFile(const std::string& path) {
   }
   std::map<std::string, std::string> header;
   bool matrices = false;
-  while (std::getline(in, line)) {
+  while (nextLine(text, pos, line)) {
     if (line == kMatrices) {
       matrices = true;
       break;
@@ -136,23 +152,24 @@ PolicyFile readPolicyFile(const std::string& path) {
   p.scene = field("scene");
   p.state_layout = field("state_layout");
   p.control_dt = number("control_dt");
-  p.iteration = static_cast<int>(number("iteration"));
+  const double iteration = number("iteration");
+  if (!(iteration >= 0 && iteration <= 1e9))
+    throw PolicyFileError(path + ": header field 'iteration' must be in [0, 1e9], got " + field("iteration"));
+  p.iteration = static_cast<int>(iteration);
   p.cost_mean = number("cost_mean");
   p.locked_command = number("locked_command");
   p.joints = splitNames(field("joints"));
   p.cylinders = splitNames(field("cylinders"));
   p.actions = splitNames(field("actions"));
   if (!(p.control_dt > 0)) throw PolicyFileError(path + ": header field 'control_dt' must be positive");
-  std::ostringstream rest;
-  rest << in.rdbuf();
+  text.erase(0, pos);  // the matrices
   try {
-    const MatrixFile file = MatrixFile::parse(rest.str(), path);
-    const Eigen::MatrixXd& dims = file.get("dims", 1, 3);
-    const int nx = static_cast<int>(dims(0, 0)), nu = static_cast<int>(dims(0, 1)), T = static_cast<int>(dims(0, 2));
-    if (nu != static_cast<int>(p.actions.size()))
-      throw PolicyFileError(path + ": the controller has " + std::to_string(nu) + " actions, the header names " +
+    const MatrixFile file = MatrixFile::parse(text, path);
+    const MatrixDims dims = readDims(file);  // checked sizes; blocks are checked before allocating
+    if (dims.nu != static_cast<int>(p.actions.size()))
+      throw PolicyFileError(path + ": the controller has " + std::to_string(dims.nu) + " actions, the header names " +
                             std::to_string(p.actions.size()));
-    p.controller = readController(file, nx, nu, T);
+    p.controller = readController(file, dims.nx, dims.nu, dims.horizon);
   } catch (const MatrixFileError& e) {
     throw PolicyFileError(e.what());
   }

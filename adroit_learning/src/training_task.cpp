@@ -1,5 +1,7 @@
 #include "adroit_learning/training_task.h"
 
+#include <adroit_core/bounded_file.h>
+#include <adroit_core/nearest_name.h>
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
@@ -17,6 +19,9 @@ double TargetSchedule::at(int t, int horizon) const {
 }
 
 namespace {
+
+// A task file is a few dozen lines.
+constexpr std::size_t kMaxTaskFileBytes = 1 * kMiB;
 
 class Reader {
  public:
@@ -91,9 +96,9 @@ const std::set<std::string> kKnownFields = {
 TrainingTask loadTrainingTask(const std::string& path) {
   YAML::Node root;
   try {
-    root = YAML::LoadFile(path);
-  } catch (const YAML::BadFile&) {
-    throw TaskError(path + ": cannot read the file");
+    root = YAML::Load(readBoundedFile(path, kMaxTaskFileBytes));
+  } catch (const FileError& e) {
+    throw TaskError(e.what());
   } catch (const YAML::Exception& e) {
     throw TaskError(path + ": not valid YAML: " + e.what());
   }
@@ -198,7 +203,8 @@ TrainingTask findTrainingTask(const std::string& dir, const std::string& name) {
   if (std::find(names.begin(), names.end(), name) == names.end()) {
     std::string known;
     for (const auto& n : names) known += (known.empty() ? "" : ", ") + n;
-    throw TaskError("unknown task '" + name + "' (known: " + (known.empty() ? "none in " + dir : known) + ")");
+    throw TaskError("unknown task '" + name + "'" + didYouMean(name, names) + " (known: " +
+                    (known.empty() ? "none in " + dir : known) + ")");
   }
   TrainingTask task = loadTrainingTask(dir + "/" + name + ".yaml");
   if (task.name != name) throw TaskError(dir + "/" + name + ".yaml: name: '" + task.name + "' differs from the file name");

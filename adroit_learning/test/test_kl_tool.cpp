@@ -1,13 +1,16 @@
 // The kl_update tool (run as a process): its output equals the library's update on the same
 // inputs, and bad input files end it with a non-zero status and a message naming the file,
 // the block and the problem.
+#include <adroit_core/run_program.h>
+#include <sys/stat.h>
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
 #include <cstdio>
-#include <cstdlib>
+#include <filesystem>
 #include <random>
+#include <sstream>
 #include <string>
+#include <vector>
 
 #include "adroit_learning/kl_update.h"
 #include "adroit_learning/matrix_file.h"
@@ -22,15 +25,17 @@ struct ToolRun {
   std::string output;  // stdout and stderr
 };
 
+// The tool with `args` split at spaces (the test's paths have none), as an argument vector.
 ToolRun runTool(const std::string& args) {
-  const std::string command = std::string(KL_UPDATE_BINARY) + " " + args + " 2>&1";
-  FILE* pipe = popen(command.c_str(), "r");
-  if (!pipe) return {-1, "popen failed"};
-  std::string output;
-  char buf[512];
-  while (fgets(buf, sizeof buf, pipe)) output += buf;
-  const int status = pclose(pipe);
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, output};
+  std::vector<std::string> argv = {KL_UPDATE_BINARY};
+  std::istringstream words(args);
+  for (std::string w; words >> w;) argv.push_back(w);
+  adroit::ProgramOptions options;
+  options.timeout_s = 120.0;
+  options.capture_output = true;
+  options.merge_stderr = true;
+  const adroit::ProgramResult r = adroit::runProgram(argv, options);
+  return {r.exit_code, r.output + (r.ok() ? "" : " [" + r.describe() + "]")};
 }
 
 void writeText(const std::string& path, const std::string& text) {
@@ -59,7 +64,7 @@ class KlTool : public ::testing::Test {
     prev_text_ = p.text();
     writeAll(dyn_text_, cost_text_, prev_text_);
   }
-  void TearDown() override { std::system(("rm -rf " + dir_).c_str()); }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
 
   void writeAll(const std::string& d, const std::string& c, const std::string& p) {
     writeText(path("dyn.txt"), d);
@@ -150,4 +155,54 @@ TEST_F(KlTool, BadArgumentsAndMissingFilesFail) {
   run = runTool(replaced(args(), path("cost.txt"), path("absent.txt")));
   EXPECT_EQ(run.status, 1);
   EXPECT_NE(run.output.find(path("absent.txt") + ": cannot open"), std::string::npos) << run.output;
+}
+
+TEST_F(KlTool, OverflowIsReportedAsAFailureNotAConvergedUpdate) {
+  // Finite but huge dynamics (f = 1e160): the marginals overflow. Before, the tool wrote the
+  // update with a non-finite predicted cost and exit status 0.
+  LgDynamics huge = dyn_;
+  for (auto& f : huge.f) f.setConstant(1e160);
+  MatrixFile d("dyn");
+  writeDynamics(huge, d);
+  writeAll(d.text(), cost_text_, prev_text_);
+  const ToolRun run = runTool(args());
+  EXPECT_EQ(run.status, 2) << run.output;
+  EXPECT_NE(run.output.find("KL or expected cost not finite"), std::string::npos) << run.output;
+  EXPECT_FALSE(std::filesystem::exists(path("new.txt")));
+}
+
+TEST_F(KlTool, IndefiniteCovariancesAreRefusedNamingTheBlock) {
+  LgDynamics bad = dyn_;
+  bad.Sigma[2](0, 0) = -1.0;  // symmetric, indefinite
+  MatrixFile d("dyn");
+  writeDynamics(bad, d);
+  writeAll(d.text(), cost_text_, prev_text_);
+  ToolRun run = runTool(args());
+  EXPECT_EQ(run.status, 1) << run.output;
+  EXPECT_NE(run.output.find(path("dyn.txt") + ": block 'Sigma.2': not positive semi-definite"), std::string::npos)
+      << run.output;
+  bad = dyn_;
+  bad.x0_cov(1, 2) = bad.x0_cov(2, 1) = 1.0;  // off-diagonal 1 on a 0.01 diagonal
+  d = MatrixFile("dyn");
+  writeDynamics(bad, d);
+  writeAll(d.text(), cost_text_, prev_text_);
+  run = runTool(args());
+  EXPECT_EQ(run.status, 1) << run.output;
+  EXPECT_NE(run.output.find("block 'x0_cov': not positive semi-definite"), std::string::npos) << run.output;
+}
+
+TEST_F(KlTool, ABadHeaderNamesTheBlockNotANumber) {
+  // One number too many in k.3: the surplus stands where the next header should.
+  writeAll(dyn_text_, cost_text_, replaced(prev_text_, "\nk.3 2 1\n", "\nk.3 2 1\n0.5\n"));
+  const ToolRun run = runTool(args());
+  EXPECT_EQ(run.status, 1) << run.output;
+  EXPECT_NE(run.output.find("block 'k.3' (2x1): the number"), std::string::npos) << run.output;
+  EXPECT_EQ(run.output.find("block '0"), std::string::npos) << run.output;
+}
+
+TEST_F(KlTool, AFifoInputIsRefusedWithoutBlocking) {
+  ASSERT_EQ(mkfifo(path("fifo").c_str(), 0600), 0);
+  const ToolRun run = runTool(replaced(args(), path("dyn.txt"), path("fifo")));
+  EXPECT_EQ(run.status, 1) << run.output;
+  EXPECT_NE(run.output.find(path("fifo") + ": not a regular file (a FIFO)"), std::string::npos) << run.output;
 }

@@ -338,3 +338,28 @@ TEST(StepSize, FollowsPredictedAgainstActualImprovement) {
   // No predicted improvement: shrink.
   EXPECT_DOUBLE_EQ(adjustEpsilon(2.0, 10.0, 10.5, 10.0, 9.0), 0.2);
 }
+
+TEST(KlUpdate, OverflowIsAFailureNeverAConvergedUpdate) {
+  // Finite but huge dynamics overflow the marginals. Before, max(0, NaN) made such a KL 0 (an
+  // update "converged" on it), and an update with a non-finite predicted cost was returned.
+  std::mt19937 rng(12);
+  const int nx = 4, nu = 2, T = 6;
+  const LgDynamics dyn = randomDynamics(rng, nx, nu, T);
+  const QuadraticCost cost = randomCost(rng, nx, nu, T);
+  const LgController prev = initialController(nx, nu, T);
+  const LgController other = LgController::initial(nx, T, VectorXd::Zero(nu), VectorXd::Constant(nu, 0.3));
+  LgDynamics huge_fx = dyn;
+  for (auto& F : huge_fx.Fx) F *= 1e160;
+  TrajectoryMarginals m;
+  forwardMarginals(huge_fx, prev, m);
+  EXPECT_TRUE(std::isnan(klDivergence(other, prev, m)));  // not clamped to 0
+  LgDynamics huge_f = dyn;
+  for (auto& f : huge_f.f) f.setConstant(1e160);
+  KlUpdate update(nx, nu, T);
+  try {
+    const KlUpdateResult r = update.update(huge_f, cost, prev, 0.5);
+    FAIL() << "an update: kl " << r.kl << " predicted_cost " << r.predicted_cost << " converged " << r.converged;
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("KL or expected cost not finite at 2"), std::string::npos) << e.what();
+  }
+}

@@ -4,7 +4,9 @@
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 
+#include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 
@@ -134,4 +136,49 @@ TEST(PolicyFile, FailedReplaceKeepsTheTargetAndLeavesNoTemporary) {
   struct stat st;
   EXPECT_NE(::stat((dir + ".tmp." + std::to_string(::getpid())).c_str(), &st), 0);
   EXPECT_THROW(adroit::writePolicyFile(tempPath("no/such/dir/p.tvlg"), examplePolicy()), adroit::PolicyFileError);
+}
+
+namespace {
+double secondsToRead(const std::string& path, std::string& error) {
+  const auto start = std::chrono::steady_clock::now();
+  error = readError(path);
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+}  // namespace
+
+TEST(PolicyFile, AHugeHorizonInASmallFileIsRefusedWithoutAllocating) {
+  // T = 1e6 at nx 88, nu 40 would be ~54 GB: before, it was allocated before the blocks were
+  // looked for (std::bad_alloc, or the machine's memory).
+  adroit::PolicyFile p = examplePolicy();
+  p.actions.resize(40, "A_a");
+  p.controller = adroit::LgController::initial(88, 1, Eigen::VectorXd::Zero(40), Eigen::VectorXd::Constant(40, 0.3));
+  const std::string path = tempPath("huge_t.tvlg");
+  adroit::writePolicyFile(path, p);
+  std::string text = fileText(path);
+  const std::string dims = "dims 1 3\n88 40 1\n";
+  ASSERT_NE(text.find(dims), std::string::npos);
+  text.replace(text.find(dims), dims.size(), "dims 1 3\n88 40 1000000\n");
+  std::ofstream(path) << text;
+  std::string e;
+  EXPECT_LT(secondsToRead(path, e), 1.0);
+  EXPECT_EQ(e, path + ": T = 1000000 needs 3000000 per-step blocks, the file has 4 blocks in all");
+}
+
+TEST(PolicyFile, OnlyRegularFilesWithinTheLimitAreRead) {
+  const std::string fifo = tempPath("policy.fifo");
+  ::unlink(fifo.c_str());
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  std::string e;
+  EXPECT_LT(secondsToRead(fifo, e), 0.5);  // no writer: a plain open would block for good
+  EXPECT_EQ(e, fifo + ": not a regular file (a FIFO)");
+  ::unlink(fifo.c_str());
+  EXPECT_EQ(readError("/dev/zero"), "/dev/zero: not a regular file (a character device)");
+  const std::string dir = tempPath("policy_is_a_dir");
+  ::mkdir(dir.c_str(), 0755);
+  EXPECT_EQ(readError(dir), dir + ": not a regular file (a directory)");  // was "empty file"
+  const std::string big = tempPath("big.tvlg");
+  adroit::writePolicyFile(big, examplePolicy());
+  std::filesystem::resize_file(big, adroit::kMaxPolicyFileBytes + 1);  // sparse
+  EXPECT_EQ(readError(big), big + ": 256 MB, over the limit of 256 MB");
+  ::unlink(big.c_str());
 }

@@ -1,8 +1,12 @@
 // Task files: the shipped ones load; a bad file is refused with its name and the field.
+#include <adroit_core/bounded_file.h>
 #include <adroit_learning/training_task.h>
 #include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <string>
 
@@ -99,4 +103,37 @@ TEST(TrainingTask, InitialObjectPositionIsOptionalAndChecked) {
   EXPECT_NE(e.find("initial_object_position: not finite"), std::string::npos) << e;
   e = loadError(std::string(kMinimal) + "initial_object_position: [0, 0, 0.1]\n");
   EXPECT_NE(e.find("initial_object_position: only for tasks with object"), std::string::npos) << e;
+}
+
+TEST(TrainingTask, OnlyRegularFilesWithinTheLimitAreRead) {
+  const auto error = [](const std::string& path) {
+    try {
+      adroit::loadTrainingTask(path);
+    } catch (const adroit::TaskError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  const std::string dir = ::testing::TempDir() + "/task_files";
+  std::filesystem::create_directories(dir);
+  const std::string fifo = dir + "/fifo.yaml";
+  ::unlink(fifo.c_str());
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  EXPECT_EQ(error(fifo), fifo + ": not a regular file (a FIFO)");  // before: blocked for good
+  EXPECT_EQ(error("/dev/zero"), "/dev/zero: not a regular file (a character device)");
+  EXPECT_EQ(error(dir), dir + ": not a regular file (a directory)");
+  const std::string big = dir + "/big.yaml";
+  std::ofstream(big) << kMinimal;
+  std::filesystem::resize_file(big, 2 * adroit::kMiB);
+  EXPECT_EQ(error(big), big + ": 2 MB, over the limit of 1 MB");
+  std::filesystem::remove_all(dir);
+}
+
+TEST(TrainingTask, UnknownTaskSuggestsTheNearestName) {
+  try {
+    adroit::findTrainingTask(TASK_DIR, "position_with_gravty");
+    FAIL() << "no error";
+  } catch (const adroit::TaskError& e) {
+    EXPECT_NE(std::string(e.what()).find("(did you mean position_with_gravity?)"), std::string::npos) << e.what();
+  }
 }

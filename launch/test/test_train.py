@@ -1,10 +1,13 @@
 #!/usr/bin/python3
 """train.launch: a training job started with rosservice runs through the simulation driver in
 lockstep, reports progress, lowers the cost, saves policies that execute_policy runs; bad
-requests get a clear answer and disturb nothing."""
+requests get a clear answer and disturb nothing: no driver step, no latched safe state, and
+train, status and cancel agree that nothing runs."""
 import csv
+import math
 import os
 import tempfile
+import threading
 import time
 import unittest
 
@@ -12,6 +15,8 @@ import rospy
 import rostest
 from adroit_msgs.msg import TrainProgress
 from adroit_msgs.srv import ExecutePolicy, Train, TrainStatus
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 
@@ -23,6 +28,32 @@ def wall_wait(predicate, timeout):
             return True
         time.sleep(0.05)
     return predicate()
+
+
+class DriverActivity:
+    """Counts the lockstep driver's /clock and joint_states messages: both move only when it steps."""
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.clock = self.joints = 0
+        self.subs = [rospy.Subscriber("/clock", Clock, self.on_clock),
+                     rospy.Subscriber("/adroit/joint_states", JointState, self.on_joints)]
+
+    def on_clock(self, _):
+        with self.lock:
+            self.clock += 1
+
+    def on_joints(self, _):
+        with self.lock:
+            self.joints += 1
+
+    def counts(self):
+        with self.lock:
+            return self.clock, self.joints
+
+    def close(self):
+        for sub in self.subs:
+            sub.unregister()
 
 
 class TrainThroughDriver(unittest.TestCase):
@@ -44,6 +75,9 @@ class TrainThroughDriver(unittest.TestCase):
         r = self.train(task="position_with_gravity", iterations=0)
         self.assertFalse(r.accepted)
         self.assertIn("iterations", r.message)
+        r = self.train(task="position_with_gravity", iterations=3000000000)  # was "not positive"
+        self.assertFalse(r.accepted)
+        self.assertEqual(r.message, "iterations must be in [1, 10000], got 3000000000")
         r = self.train(task="position_with_gravity", iterations=3, rollouts=1)
         self.assertFalse(r.accepted)
         self.assertIn("samples", r.message)
@@ -56,7 +90,9 @@ class TrainThroughDriver(unittest.TestCase):
     def test_2_trains_positioning_and_runs_the_policy(self):
         progress = []
         sub = rospy.Subscriber("/adroit_learning/progress", TrainProgress, progress.append)
-        out = os.path.join(self.out, "job")
+        # A quote in the output directory once ended the plot command's shell quoting.
+        marker = os.path.join(self.out, "injected")
+        out = os.path.join(self.out, "job q'; touch " + marker + "; echo '")
         r = self.train(task="position_with_gravity", iterations=3, rollouts=5, seed=7, output_dir=out)
         self.assertTrue(r.accepted, r.message)
         self.assertTrue(r.job_id.startswith("position_with_gravity-"))
@@ -82,6 +118,7 @@ class TrainThroughDriver(unittest.TestCase):
         self.assertEqual([int(row["iteration"]) for row in rows], [0, 1, 2])
         self.assertAlmostEqual(float(rows[-1]["cost_mean"]), progress[-1].cost_mean, delta=1e-6 * progress[-1].cost_mean)
         self.assertTrue(os.path.getsize(os.path.join(out, "learning_curve.png")) > 1000)
+        self.assertFalse(os.path.exists(marker))
         # The saved controller runs on the driver; its mean is at least as good as the noisy rollouts.
         result = self.execute(policy_path=progress[-1].policy_path, policy_type="tvlg")
         self.assertTrue(result.success, result.message)
@@ -101,6 +138,41 @@ class TrainThroughDriver(unittest.TestCase):
         self.assertFalse(r.success)
         self.assertIn("none.tvlg", r.message)
         self.assertEqual(self.status().state, "finished")  # nothing else disturbed
+
+    def test_3b_refused_requests_change_nothing(self):
+        final = os.path.join(self.out, "job q'; touch " + os.path.join(self.out, "injected") + "; echo '",
+                             "final.tvlg")
+        fifo = os.path.join(self.out, "policy.fifo")
+        os.mkfifo(fifo)
+        activity = DriverActivity()
+        time.sleep(1.0)  # the subscriptions connect; the paused driver publishes nothing
+        before = activity.counts()
+        refused = [(dict(policy_path=final, duration=float("inf")), "got inf"),
+                   (dict(policy_path=final, duration=float("nan")), "got nan"),
+                   (dict(policy_path=final, duration=-1.0), "got -1"),
+                   (dict(policy_path=final, duration=1e300), "got 1e+300"),
+                   (dict(policy_path=os.path.join(self.out, "none.tvlg")), "none.tvlg: cannot open"),
+                   (dict(policy_path=fifo), fifo + ": not a regular file (a FIFO)"),
+                   (dict(policy_path=self.out), self.out + ": not a regular file (a directory)"),
+                   (dict(policy_path="/dev/zero"), "/dev/zero: not a regular file (a character device)")]
+        for request, message in refused:
+            start = time.time()
+            r = self.execute(**request)
+            self.assertFalse(r.success, request)
+            self.assertIn(message, r.message)
+            self.assertTrue(math.isnan(r.final_cost))
+            self.assertLess(time.time() - start, 5.0, request)  # a FIFO no longer blocks
+            # Busy and idle answers agree: nothing runs.
+            self.assertEqual(self.status().state, "finished")
+            self.assertEqual(self.cancel().message, "no job is running")
+        time.sleep(1.0)
+        self.assertEqual(activity.counts(), before, "a refused request stepped the driver")
+        # No latched watchdog or e-stop: the next request runs without a release.
+        r = self.execute(policy_path=final, duration=1.0)
+        self.assertTrue(r.success, r.message)
+        self.assertIn("ran 25 steps", r.message)
+        self.assertTrue(wall_wait(lambda: activity.counts()[0] > before[0], 5))  # the counter sees steps
+        activity.close()
 
     def test_4_a_task_of_another_scene_fails_clearly(self):
         # The driver runs the hand scene; the tube tasks have the same joints but an object.

@@ -76,7 +76,8 @@ void forwardMarginals(const LgDynamics& dyn, const LgController& controller, Tra
 // E[sum_t l_t + l_T] under the marginals (exact for Gaussian marginals and quadratic cost).
 double expectedCost(const QuadraticCost& cost, const TrajectoryMarginals& marginals);
 // KL(p_new(tau) || p_old(tau)) = sum_t E_{x ~ p_new(x_t)} KL(p_new(u|x) || p_old(u|x)), given
-// p_new's marginals (both trajectory distributions share the dynamics and x_0).
+// p_new's marginals (both trajectory distributions share the dynamics and x_0). NaN when the
+// marginals overflowed.
 double klDivergence(const LgController& p_new, const LgController& p_old, const TrajectoryMarginals& new_marginals,
                     ThreadPool* pool = nullptr);
 
@@ -113,8 +114,9 @@ class KlUpdate {
 
   // Dual descent on eta: from eta_init, secant steps in log-log (at most 100x, 10x after a
   // failed solve) until the band is bracketed, then regula falsi in log-log with bisection as
-  // the fallback. Throws std::runtime_error when no eta up to eta_max gives a
-  // positive definite Q_uu, std::invalid_argument for inconsistent sizes or epsilon <= 0.
+  // the fallback. An eta whose KL or expected cost is not finite (overflow) counts as a failed
+  // solve. Throws std::runtime_error when no eta up to eta_max gives a positive definite Q_uu
+  // with a finite KL and cost, std::invalid_argument for inconsistent sizes or epsilon <= 0.
   KlUpdateResult update(const LgDynamics& dyn, const QuadraticCost& cost, const LgController& prev, double epsilon,
                         const KlUpdateSettings& settings = {});
 

@@ -21,6 +21,8 @@
 namespace adroit {
 
 constexpr int kPolicyFormatVersion = 1;
+// A policy of nx 88, nu 40, T 50 takes about 6 MB.
+constexpr std::size_t kMaxPolicyFileBytes = 256 * kMiB;
 
 class PolicyFileError : public std::runtime_error {
  public:
@@ -41,7 +43,9 @@ struct PolicyFile {
 // is then untouched.
 void writePolicyFile(const std::string& path, const PolicyFile& policy);
 // Throws PolicyFileError "<path>: <what is wrong>" for a missing, corrupt, truncated or
-// other-version file.
+// other-version file, for anything but a regular file (a FIFO, a device, a directory) and for
+// a file over kMaxPolicyFileBytes; sizes in its header are checked against its blocks before
+// the controller is allocated.
 PolicyFile readPolicyFile(const std::string& path);
 
 // Checks a policy against the robot it is about to run on; returns "" when it fits, else one

@@ -18,10 +18,8 @@
 #include <ros/ros.h>
 
 #include <algorithm>
-#include <fstream>
 #include <mutex>
 #include <optional>
-#include <sstream>
 
 #include <adroit_msgs/Calibrate.h>
 #include <adroit_msgs/ForceReference.h>
@@ -97,7 +95,7 @@ class TeleopNode {
  public:
   TeleopNode(ros::NodeHandle nh, ros::NodeHandle pnh) : params_(readParams(rosutil::Params(pnh))) {
     try {
-      calibration_ = loadCalibration(params_.calibration_path);
+      loadCalibrationFile(params_.calibration_path);
     } catch (const CalibrationError& e) {
       throw rosutil::ParameterError("adroit_teleop: bad parameter " + pnh.resolveName("calibration") + ": " + e.what());
     }
@@ -311,10 +309,15 @@ class TeleopNode {
   }
 
   // What a recorded demonstration needs to be understood later (latched, so rosbag gets it).
+  // The calibration file, read once (bounded, a regular file only): what runs is what the
+  // metadata records. Throws CalibrationError naming the file.
+  void loadCalibrationFile(const std::string& path) {
+    std::string text = readCalibrationText(path);
+    calibration_ = parseCalibration(path, text);
+    calibration_text_ = std::move(text);
+  }
+
   void publishMetadata() {
-    std::ifstream file(params_.calibration_path);
-    std::stringstream calibration_file;
-    calibration_file << file.rdbuf();
     YAML::Emitter yaml;
     yaml << YAML::BeginMap;
     yaml << YAML::Key << "task" << YAML::Value << params_.task;
@@ -328,7 +331,7 @@ class TeleopNode {
     yaml << YAML::Key << "stiffness" << YAML::Value << params_.gains.stiffness;
     yaml << YAML::Key << "damping" << YAML::Value << params_.gains.damping;
     yaml << YAML::Key << "min_tension" << YAML::Value << params_.gains.min_tension << YAML::EndMap;
-    yaml << YAML::Key << "calibration_file" << YAML::Value << YAML::Literal << calibration_file.str();
+    yaml << YAML::Key << "calibration_file" << YAML::Value << YAML::Literal << calibration_text_;
     yaml << YAML::EndMap;
     std_msgs::String m;
     m.data = yaml.c_str();
@@ -408,7 +411,7 @@ class TeleopNode {
     fitted.created = created;
     fitted.note = "fitted by /adroit_teleop/calibrate on the poses of " + params_.poses_path;
     saveCalibration(path, fitted);
-    calibration_ = loadCalibration(path);  // what was written is what runs
+    loadCalibrationFile(path);  // what was written is what runs
     params_.calibration_path = path;
     session_.reset();
     mapping_.reset();  // the joint rows of the new calibration are looked up again
@@ -442,6 +445,7 @@ class TeleopNode {
 
   TeleopParams params_;
   GloveCalibration calibration_;
+  std::string calibration_text_;  // the file calibration_ was parsed from, for the metadata
   ModelPtr model_;
 
   // Everything below, between the input queue and the spinner threads. Priority inheritance:

@@ -159,12 +159,12 @@ class Reader {
   }
   [[noreturn]] void fail(const std::string& problem) const { throw CalibrationError(path_ + ": " + problem); }
 
-  YAML::Node load() const {
+  YAML::Node load() const { return parse(readCalibrationText(path_)); }
+
+  YAML::Node parse(const std::string& text) const {
     YAML::Node root;
     try {
-      root = YAML::LoadFile(path_);
-    } catch (const YAML::BadFile&) {
-      fail(std::string("cannot read the file: ") + std::strerror(errno));
+      root = YAML::Load(text);
     } catch (const YAML::Exception& e) {
       fail(std::string("not valid YAML: ") + e.what());
     }
@@ -298,9 +298,19 @@ void saveCalibration(const std::string& path, const GloveCalibration& cal) {
                                 out.c_str() + "\n");
 }
 
-GloveCalibration loadCalibration(const std::string& path) {
+std::string readCalibrationText(const std::string& path) {
+  try {
+    return readBoundedFile(path, kMaxCalibrationFileBytes);
+  } catch (const FileError& e) {  // "<path>: <why>"
+    throw CalibrationError(e.what());
+  }
+}
+
+GloveCalibration loadCalibration(const std::string& path) { return parseCalibration(path, readCalibrationText(path)); }
+
+GloveCalibration parseCalibration(const std::string& path, const std::string& text) {
   const Reader r(path);
-  const YAML::Node root = r.load();
+  const YAML::Node root = r.parse(text);
   r.version(root, kCalibrationFormatVersion);
   r.onlyKeys(root, {"version", "created", "note", "sensors", "lambda", "joints", "ranges", "W", "b", "residual_rms",
                     "fit_samples"},

@@ -5,7 +5,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
-#include <fstream>
+#include <sstream>
 #include <limits>
 
 namespace adroit::teleop {
@@ -63,13 +63,22 @@ std::string fmt(double x) {
   return buf;
 }
 
+// The file's text: a regular file of at most kMaxTrajectoryFileBytes (a FIFO, a device or a
+// directory is refused unread, so the load never blocks). Throws TrajectoryError "<path>: ...".
+std::string readTrajectoryText(const std::string& path) {
+  try {
+    return readBoundedFile(path, kMaxTrajectoryFileBytes);
+  } catch (const FileError& e) {
+    throw TrajectoryError(e.what());
+  }
+}
+
 }  // namespace
 
 CsvTrajectory CsvTrajectory::load(const std::string& path, int sensors) {
   if (!validSensorCount(sensors))
     throw TrajectoryError(path + ": sensor count must be 18 or 22, got " + std::to_string(sensors));
-  std::ifstream in(path);
-  if (!in) throw TrajectoryError(path + ": cannot read: " + std::strerror(errno));
+  std::istringstream in(readTrajectoryText(path));
   CsvTrajectory traj;
   traj.sensors_ = sensors;
   const std::size_t columns = static_cast<std::size_t>(sensors) + 1;
@@ -109,7 +118,6 @@ CsvTrajectory CsvTrajectory::load(const std::string& path, int sensors) {
       traj.values_.push_back(static_cast<std::uint8_t>(v));
     }
   }
-  if (in.bad()) throw TrajectoryError(path + ": read error: " + std::strerror(errno));
   if (traj.times_.empty()) throw TrajectoryError(path + ": no samples");
   const std::size_t m = traj.times_.size();
   traj.loop_ = m == 1 ? 0 : traj.times_[m - 1] + (traj.times_[m - 1] - traj.times_[m - 2]);

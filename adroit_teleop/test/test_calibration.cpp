@@ -12,6 +12,7 @@
 #include <regex>
 
 #include "temp_dir.h"
+#include "unreadable_files.h"
 
 using namespace adroit::teleop;
 
@@ -278,6 +279,43 @@ TEST(GloveCalibration, MalformedFilesNameTheFileAndTheProblem) {
     loadCalibration("/nonexistent/cal.yaml");
     FAIL() << "no error";
   } catch (const CalibrationError& e) {
-    EXPECT_EQ(std::string(e.what()).rfind("/nonexistent/cal.yaml: cannot read the file", 0), 0u) << e.what();
+    EXPECT_EQ(std::string(e.what()).rfind("/nonexistent/cal.yaml: cannot open", 0), 0u) << e.what();
+  }
+}
+
+// A calibration path comes from a parameter or a service request: only a regular file of
+// bounded size is read, and anything else is one error naming the file, without blocking.
+TEST(GloveCalibration, OnlyRegularFilesOfBoundedSizeAreRead) {
+  using test::errorWithin;
+  const std::string fifo = test::makeFifo(tempPath("cal_fifo.yaml"));
+  std::string e = errorWithin<CalibrationError>([&] { loadCalibration(fifo); }, fifo);
+  EXPECT_EQ(e, fifo + ": not a regular file (a FIFO)");
+  e = errorWithin<CalibrationError>([&] { readCalibrationText(fifo); }, fifo);  // the node's metadata read
+  EXPECT_EQ(e, fifo + ": not a regular file (a FIFO)");
+  e = errorWithin<CalibrationError>([&] { loadCalibration(scratchDir()); }, fifo);
+  EXPECT_EQ(e, scratchDir() + ": not a regular file (a directory)");
+  e = errorWithin<CalibrationError>([&] { loadCalibration("/dev/zero"); }, fifo);
+  EXPECT_EQ(e, "/dev/zero: not a regular file (a character device)");
+
+  const std::string big = test::makeSparseFile(tempPath("big_cal.yaml"), kMaxCalibrationFileBytes + 1);
+  e = errorWithin<CalibrationError>([&] { loadCalibration(big); }, fifo);
+  EXPECT_EQ(e.rfind(big + ": ", 0), 0u) << e;
+  EXPECT_NE(e.find("over the limit of 1 MB"), std::string::npos) << e;
+  // A valid file right at the limit still loads (comments fill it up).
+  std::string padded = kGood;
+  while (padded.size() < kMaxCalibrationFileBytes) padded += std::string(std::min<std::size_t>(
+      99, kMaxCalibrationFileBytes - padded.size() - 1), '#') + "\n";
+  ASSERT_EQ(padded.size(), kMaxCalibrationFileBytes);
+  EXPECT_EQ(loadError(padded), "");
+}
+
+TEST(GloveCalibration, ParseNamesTheFileItWasReadFrom) {
+  const GloveCalibration cal = parseCalibration("mem.yaml", kGood);
+  EXPECT_EQ(cal.sensors(), 2);
+  try {
+    parseCalibration("mem.yaml", "{{{");
+    FAIL() << "no error";
+  } catch (const CalibrationError& e) {
+    EXPECT_EQ(std::string(e.what()).rfind("mem.yaml: not valid YAML", 0), 0u) << e.what();
   }
 }

@@ -12,6 +12,7 @@
 #include <set>
 
 #include "temp_dir.h"
+#include "unreadable_files.h"
 
 using namespace adroit::teleop;
 
@@ -216,6 +217,20 @@ TEST(CalibrationPoses, BadPoseFilesAreRefused) {
     EXPECT_EQ(e.rfind(prefix, 0), 0u) << "message does not start with the file: " << e;
     EXPECT_NE(e.find(problem), std::string::npos) << "expected '" << problem << "' in: " << e;
   }
+}
+
+// The pose file is a parameter (~poses, nominal_calibration --poses): read only when it is a
+// regular file of bounded size, without blocking on a FIFO.
+TEST(CalibrationPoses, OnlyRegularFilesOfBoundedSizeAreRead) {
+  using test::errorWithin;
+  const std::string fifo = test::makeFifo(scratchDir() + "/poses_fifo.yaml");
+  const auto load = [](const std::string& path) { return [path] { loadCalibrationPoses(path, kKnown); }; };
+  EXPECT_EQ(errorWithin<CalibrationError>(load(fifo), fifo), fifo + ": not a regular file (a FIFO)");
+  EXPECT_EQ(errorWithin<CalibrationError>(load(scratchDir()), fifo), scratchDir() + ": not a regular file (a directory)");
+  const std::string big = test::makeSparseFile(scratchDir() + "/big_poses.yaml", kMaxCalibrationFileBytes + 1);
+  const std::string e = errorWithin<CalibrationError>(load(big), fifo);
+  EXPECT_EQ(e.rfind(big + ": ", 0), 0u) << e;
+  EXPECT_NE(e.find("over the limit of 1 MB"), std::string::npos) << e;
 }
 
 TEST(CalibrationPoses, FreeJointsAreLeftOutOfThePoseSamples) {

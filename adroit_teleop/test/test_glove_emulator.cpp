@@ -10,6 +10,7 @@
 #include <fstream>
 
 #include "temp_dir.h"
+#include "unreadable_files.h"
 
 using namespace adroit::teleop;
 using Bytes = std::vector<std::uint8_t>;
@@ -261,6 +262,21 @@ TEST(CsvTrajectory, BadFilesNameFileAndLine) {
     CsvTrajectory::load("/nonexistent/traj.csv", 18);
     FAIL() << "no error";
   } catch (const TrajectoryError& err) {
-    EXPECT_EQ(std::string(err.what()), "/nonexistent/traj.csv: cannot read: No such file or directory");
+    EXPECT_EQ(std::string(err.what()), "/nonexistent/traj.csv: cannot open (No such file or directory)");
   }
+}
+
+// --trajectory names a file from outside: only a regular file of bounded size is read, and
+// anything else is one error naming the file, without blocking.
+TEST(CsvTrajectory, OnlyRegularFilesOfBoundedSizeAreRead) {
+  using test::errorWithin;
+  const std::string fifo = test::makeFifo(scratchDir() + "/traj_fifo.csv");
+  const auto load = [](const std::string& path) { return [path] { CsvTrajectory::load(path, 18); }; };
+  EXPECT_EQ(errorWithin<TrajectoryError>(load(fifo), fifo), fifo + ": not a regular file (a FIFO)");
+  EXPECT_EQ(errorWithin<TrajectoryError>(load(scratchDir()), fifo), scratchDir() + ": not a regular file (a directory)");
+  EXPECT_EQ(errorWithin<TrajectoryError>(load("/dev/zero"), fifo), "/dev/zero: not a regular file (a character device)");
+  const std::string big = test::makeSparseFile(scratchDir() + "/big_traj.csv", kMaxTrajectoryFileBytes + 1);
+  const std::string e = errorWithin<TrajectoryError>(load(big), fifo);
+  EXPECT_EQ(e.rfind(big + ": ", 0), 0u) << e;
+  EXPECT_NE(e.find("over the limit of 64 MB"), std::string::npos) << e;
 }

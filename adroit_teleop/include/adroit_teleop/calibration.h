@@ -5,6 +5,7 @@
 // poses; saved to and loaded from a versioned YAML file.
 #pragma once
 
+#include <adroit_core/bounded_file.h>
 #include <mujoco/mujoco.h>
 
 #include <Eigen/Core>
@@ -22,6 +23,10 @@ constexpr int kCalibrationFormatVersion = 1;
 // lambda)), while directions the poses never moved (only noise there) are damped towards 0
 // instead of being fitted to the noise.
 constexpr double kDefaultRidgeLambda = 1e-4;
+// The largest calibration or pose file read. A 22-sensor calibration of a 30-joint hand is
+// about 15 kB (W alone is 660 doubles written exactly) and the pose file a few kB: 1 MiB is
+// far above any real file, and a wrong path (a log, a device, a bag) is refused unread.
+constexpr std::size_t kMaxCalibrationFileBytes = 1 * kMiB;
 
 class CalibrationError : public std::runtime_error {
  public:
@@ -96,7 +101,14 @@ GloveCalibration fitCalibration(int sensors, const std::vector<std::string>& joi
 void saveCalibration(const std::string& path, const GloveCalibration& calibration);
 // Validates everything (missing or unknown keys, sizes, non-finite numbers, version, ranges);
 // throws CalibrationError whose message starts with "<path>: " and names the key.
+// The file must be a regular file of at most kMaxCalibrationFileBytes (readCalibrationText).
 GloveCalibration loadCalibration(const std::string& path);
+// The text of a calibration or pose file: a regular file (a FIFO, a device or a directory is
+// refused without reading, so this never blocks) of at most kMaxCalibrationFileBytes. Throws
+// CalibrationError "<path>: not a regular file (a FIFO)", "<path>: 2 MB, over the limit of 1 MB".
+std::string readCalibrationText(const std::string& path);
+// loadCalibration on a text already read (readCalibrationText); `path` names it in errors.
+GloveCalibration parseCalibration(const std::string& path, const std::string& text);
 
 // --- calibration poses -----------------------------------------------------------------------
 

@@ -9,6 +9,7 @@
 //   write(out.bytes); out.clear();
 #pragma once
 
+#include <adroit_core/bounded_file.h>
 #include <adroit_teleop/glove_protocol.h>
 
 #include <array>
@@ -50,6 +51,11 @@ class TrajectoryError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// The largest trajectory file read: a glove recorded at 150 Hz with 22 values of up to 3
+// digits is about 15 kB a second, so 64 MiB holds over an hour; a wrong path (a bag, a
+// device) is refused before a byte is read.
+constexpr std::size_t kMaxTrajectoryFileBytes = 64 * kMiB;
+
 // A recorded trajectory played back in time and looped. File: one row per sample,
 // "t, s1, ..., sN" (comma separated, t in seconds strictly increasing, values 1..255, rounded
 // to the nearest integer); an optional header row first; blank lines and '#' lines ignored.
@@ -58,6 +64,8 @@ class TrajectoryError : public std::runtime_error {
 // interval, so the last row is held as long as the one before it.
 class CsvTrajectory : public GloveTrajectory {
  public:
+  // Reads a regular file of at most kMaxTrajectoryFileBytes (a FIFO, a device or a directory is
+  // refused without blocking). Throws TrajectoryError naming the file (and line).
   static CsvTrajectory load(const std::string& path, int sensors);
   int sensors() const override { return sensors_; }
   void sample(double t, std::uint8_t* out) const override;

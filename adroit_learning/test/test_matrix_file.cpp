@@ -146,7 +146,7 @@ TEST(MatrixFile, OnlyRegularFilesWithinTheLimitAreRead) {
   { std::ofstream(big) << "A 1 1 1\n"; }
   std::filesystem::resize_file(big, adroit::kMaxMatrixFileBytes + 1);  // sparse: no disk used
   e = errorOf([&] { MatrixFile::read(big); });
-  EXPECT_NE(e.find(big + ": 256 MB, over the limit of 256 MB"), std::string::npos) << e;
+  EXPECT_NE(e.find(big + ": 256 MB (268435457 bytes), over the limit of 256 MB (268435456 bytes)"), std::string::npos) << e;
 }
 
 TEST(MatrixFile, CovarianceMustBeSymmetricPositiveSemiDefinite) {

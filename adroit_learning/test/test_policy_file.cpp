@@ -179,6 +179,6 @@ TEST(PolicyFile, OnlyRegularFilesWithinTheLimitAreRead) {
   const std::string big = tempPath("big.tvlg");
   adroit::writePolicyFile(big, examplePolicy());
   std::filesystem::resize_file(big, adroit::kMaxPolicyFileBytes + 1);  // sparse
-  EXPECT_EQ(readError(big), big + ": 256 MB, over the limit of 256 MB");
+  EXPECT_EQ(readError(big), big + ": 256 MB (268435457 bytes), over the limit of 256 MB (268435456 bytes)");
   ::unlink(big.c_str());
 }

@@ -50,6 +50,16 @@ std::string describeBytes(size_t bytes) {
 
 namespace {
 
+// "2 MB, over the limit of 1 MB"; with the byte counts when the rounded sizes read the same.
+std::string describeOverLimit(size_t size, size_t limit) {
+  std::string have = describeBytes(size), allowed = describeBytes(limit);
+  if (have == allowed) {
+    have += " (" + std::to_string(size) + " bytes)";
+    allowed += " (" + std::to_string(limit) + " bytes)";
+  }
+  return have + ", over the limit of " + allowed;
+}
+
 // Opens `path` for reading if it is a regular file of at most `max_bytes`; `size` set.
 Descriptor openRegularFile(const std::string& path, size_t max_bytes, size_t& size) {
   if (path.empty()) throw FileError("no file named (empty path)");
@@ -60,8 +70,7 @@ Descriptor openRegularFile(const std::string& path, size_t max_bytes, size_t& si
   if (fstat(file.fd, &info) != 0) throw FileError(path + ": cannot stat (" + std::strerror(errno) + ")");
   if (!S_ISREG(info.st_mode)) throw FileError(path + ": not a regular file (" + kindOf(info.st_mode) + ")");
   size = static_cast<size_t>(info.st_size);
-  if (size > max_bytes)
-    throw FileError(path + ": " + describeBytes(size) + ", over the limit of " + describeBytes(max_bytes));
+  if (size > max_bytes) throw FileError(path + ": " + describeOverLimit(size, max_bytes));
   return file;
 }
 

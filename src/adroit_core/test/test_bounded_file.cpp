@@ -44,6 +44,8 @@ TEST_F(BoundedFile, ReadsARegularFileWithinItsLimit) {
 TEST_F(BoundedFile, RefusesAFileOverItsLimitNamingFileAndLimit) {
   const std::string path = write("big", std::string(2048, 'x'));
   EXPECT_EQ(errorOf(path, 1024), path + ": 2 kB, over the limit of 1 kB");
+  // One byte over: the sizes round alike, so the bytes are given.
+  EXPECT_EQ(errorOf(path, 2047), path + ": 2 kB (2048 bytes), over the limit of 2 kB (2047 bytes)");
 }
 
 TEST_F(BoundedFile, RefusesAFifoWithoutBlocking) {

@@ -25,6 +25,7 @@
 #include <memory>
 #include <cstdio>
 #include <ctime>
+#include <filesystem>
 #include <fstream>
 #include <functional>
 #include <mutex>
@@ -48,6 +49,7 @@
 #include <std_msgs/Bool.h>
 
 #include "adroit_core/mujoco_model.h"
+#include "adroit_core/run_program.h"
 #include "adroit_core/scheduling.h"
 #include "adroit_driver/characterisation.h"
 #include "adroit_ros/params.h"
@@ -58,6 +60,7 @@ using adroit::rosutil::Params;
 namespace {
 
 const char* const kNode = "adroit_characterise";
+constexpr double kPlotTimeout = 120.0;  // s: the plot script draws five figures (about 10 s here)
 const std::vector<std::string> kExperiments{"bang_bang", "limit_to_limit", "reflex", "step", "chirp", "force"};
 
 std::atomic<bool> g_interrupted{false};
@@ -168,7 +171,7 @@ std::string plotScript() {
   if (n > 0) {
     const std::string path(buf, static_cast<std::size_t>(n));
     const std::string next_to = path.substr(0, path.find_last_of('/')) + "/plot_characterisation.py";
-    if (std::ifstream(next_to)) return next_to;
+    if (std::filesystem::is_regular_file(next_to)) return next_to;
   }
   return ros::package::getPath("adroit_driver") + "/bench/plot_characterisation.py";
 }
@@ -1300,20 +1303,25 @@ void Characteriser::writeReport() {
   open("summary.csv") << ch::summaryCsv(report_);
   report_.plots.clear();
   if (o_.plot) {
-    const std::string log = o_.output_dir + "/plot.log";
-    const std::string cmd = "/usr/bin/python3 '" + o_.plot_script + "' '" + o_.output_dir + "' > '" + log + "' 2>&1";
-    const int status = std::system(cmd.c_str());
-    if (status != 0)
-      report_.plot_error = "the plot script failed (exit status " + std::to_string(status) + "), see plot.log";
+    // An argument vector, never a shell: the paths come from parameters.
+    adroit::ProgramOptions options;
+    options.timeout_s = kPlotTimeout;
+    options.capture_output = true;
+    options.merge_stderr = true;
+    const adroit::ProgramResult r = adroit::runProgram({"/usr/bin/python3", o_.plot_script, o_.output_dir}, options);
+    open("plot.log") << r.output << (r.ok() ? "" : r.describe() + "\n");
+    if (!r.ok()) report_.plot_error = "the plot script failed (" + r.describe() + "), see plot.log";
     for (const char* png : {"bang_bang.png", "limit_to_limit.png", "reflex.png", "step.png", "chirp.png"})
-      if (std::ifstream(o_.output_dir + "/" + png)) report_.plots.push_back(png);
+      if (std::filesystem::is_regular_file(o_.output_dir + "/" + png)) report_.plots.push_back(png);
   }
   open("report.md") << ch::reportMarkdown(report_);
 }
 
 int Characteriser::run() {
-  if (std::system(("mkdir -p '" + o_.output_dir + "'").c_str()) != 0)
-    throw Refused("cannot create ~output_dir " + o_.output_dir);
+  std::error_code error;
+  std::filesystem::create_directories(o_.output_dir, error);
+  if (error || !std::filesystem::is_directory(o_.output_dir))
+    throw Refused("cannot create ~output_dir " + o_.output_dir + (error ? " (" + error.message() + ")" : ""));
   char started[32];
   const std::time_t t = std::time(nullptr);
   std::strftime(started, sizeof started, "%Y-%m-%d %H:%M:%S", std::localtime(&t));

@@ -10,6 +10,18 @@
 
 namespace adroit::driver {
 
+namespace {
+
+// What the operator does after a fault, naming only services this robot obeys: the
+// simulation resets; the hardware refuses /adroit/reset (a bus that went down needs
+// /adroit/recover, anything else its cause cleared on the robot).
+const char* faultRemedy(bool simulated) {
+  return simulated ? "call /adroit/reset, then /adroit/estop_release"
+                   : "clear its cause (/adroit/recover reopens a bus that is down), then /adroit/estop_release";
+}
+
+}  // namespace
+
 void RobotDriver::publishSafeStateIfChanged() {
   bool safe;
   {
@@ -48,7 +60,8 @@ void RobotDriver::onSafetyMonitor(const ros::WallTimerEvent&) {
   };
   report(counters.watchdog_trips, logged_.watchdog_trips, events.watchdog, "watchdog");
   if (counters.faults != logged_.faults) {  // a fault is an error, not a warning
-    ROS_ERROR("%s: safe state: %s; reset, then /adroit/estop_release", name_, robot_->describe(events.fault).c_str());
+    ROS_ERROR("%s: safe state: %s; %s", name_, robot_->describe(events.fault).c_str(),
+              faultRemedy(robot_->simulated()));
     logged_.faults = counters.faults;
   }
   logged_.estops = counters.estops;  // e-stops are logged where they arrive (sim_services.cpp)

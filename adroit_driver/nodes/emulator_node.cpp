@@ -34,7 +34,14 @@ using rosutil::ParameterError;
 constexpr const char* kName = "adroit_can_emulator";
 constexpr std::size_t kMaxSocketPath = 107;  // sockaddr_un::sun_path minus the terminating zero
 
+// Every key this node reads (readConfig, readBusPaths, the calibration in EmulatorNode;
+// modelPath: scene, model_file); keep in step with them.
+const std::set<std::string> kEmulatorKeys{"scene", "model_file", "initial_keyframe", "sensor_realism", "seed",
+                                          "drop_probability", "corrupt_probability", "delay", "realtime_priority",
+                                          "buses", "calibration"};
+
 can::EmulatorConfig readConfig(const rosutil::Params& p) {
+  p.checkKeys("", kEmulatorKeys);  // a misspelt key would silently run at its default
   can::EmulatorConfig c;
   c.sim.model_path = p.modelPath("arm_hand");
   c.sim.initial_keyframe = p.string("initial_keyframe", c.sim.initial_keyframe);

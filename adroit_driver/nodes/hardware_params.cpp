@@ -48,6 +48,13 @@ can::Calibration readCalibration(const rosutil::Params& p, const std::string& mo
 
 }  // namespace
 
+// The keys readCanRobotConfig and makeHardwareDriver read (modelPath: scene, model_file; the
+// wrapper's are driverKeys(false)); keep in step with them.
+const std::set<std::string> kHardwareKeys{
+    "scene", "model_file", "buses", "calibration", "timestep", "control_period", "watchdog_timeout",
+    "startup_timeout", "start_in_safe_state", "joint_velocity_cutoff", "length_rate_cutoff", "supply_pressure",
+    "joint_period", "silent_periods", "sensor_period", "connect_timeout"};
+
 CanRobotConfig readCanRobotConfig(const rosutil::Params& p) {
   CanRobotConfig c;
   c.model_path = p.modelPath("arm_hand");
@@ -76,6 +83,10 @@ CanRobotConfig readCanRobotConfig(const rosutil::Params& p) {
 
 std::unique_ptr<RobotDriver> makeHardwareDriver(ros::NodeHandle nh, ros::NodeHandle pnh) {
   const rosutil::Params p(pnh);
+  // A misspelt key would silently run at its default: refuse every key nobody reads.
+  std::set<std::string> keys = driverKeys(false);
+  keys.insert(kHardwareKeys.begin(), kHardwareKeys.end());
+  p.checkKeys("", keys);
   CanRobotConfig config = readCanRobotConfig(p);
   DriverParams params = readDriverParams(p, false);
   // The buses may come up after the driver (an emulator starting in the same launch, an

@@ -29,6 +29,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -103,6 +104,8 @@ struct DriverParams {
 // Reads and validates the wrapper's ~parameters. Throws ParameterError. `simulated` false
 // (hardware): real time only, no /clock, no start paused.
 DriverParams readDriverParams(const rosutil::Params& p, bool simulated);
+// The ~keys readDriverParams reads, for Params::checkKeys of the node that calls it.
+std::set<std::string> driverKeys(bool simulated);
 // The simulation's own ~parameters (scene, mode, timestep, sensors...). Throws ParameterError.
 SimConfig readSimConfig(const rosutil::Params& p);
 class RobotDriver;

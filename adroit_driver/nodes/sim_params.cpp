@@ -3,22 +3,36 @@
 #include <ros/param.h>
 
 #include <cmath>
+#include <cstdio>
 
 #include "adroit_driver/simulated_robot.h"
 #include "robot_driver.h"
+#include "adroit_core/number_text.h"
 
 namespace adroit::driver {
 
+using adroit::shortNumber;  // a huge value stays a short line
+
 int stepsPerPublication(const std::string& name, double rate, double timestep) {
   if (!(rate > 0) || !std::isfinite(rate))
-    throw ParameterError("bad parameter ~" + name + ": must be > 0 Hz, got " + std::to_string(rate));
+    throw ParameterError("bad parameter ~" + name + ": must be > 0 Hz, got " + shortNumber(rate));
   const double ratio = 1.0 / (rate * timestep);
   const int steps = static_cast<int>(std::lround(ratio));
   if (steps < 1 || std::abs(ratio - steps) > 1e-6)
-    throw ParameterError("bad parameter ~" + name + ": must be the step rate " + std::to_string(1.0 / timestep) +
-                         " Hz divided by a whole number, got " + std::to_string(rate));
+    throw ParameterError("bad parameter ~" + name + ": must be the step rate " + shortNumber(1.0 / timestep) +
+                         " Hz divided by a whole number, got " + shortNumber(rate));
   return steps;
 }
+
+// The keys readSimConfig reads (modelPath: scene, model_file); keep in step with it.
+const std::set<std::string> kSimConfigKeys{
+    "scene", "model_file", "mode", "timestep", "watchdog_timeout", "min_tension", "supply_pressure",
+    "initial_keyframe", "max_reset_distance", "max_reset_velocity", "reset_range_margin", "max_base_speed",
+    "max_base_angular_speed", "sensor_realism", "seed", "sensors"};
+const std::set<std::string> kSensorKeys{
+    "joint_rate", "joint_noise_std", "joint_velocity_noise_std", "joint_quantum", "joint_delay", "slide_noise_std",
+    "slide_velocity_noise_std", "slide_quantum", "cylinder_delay", "pressure_noise_std", "length_noise_std",
+    "touch_noise_std", "touch_delay", "object_noise_std", "object_delay"};
 
 SimConfig readSimConfig(const rosutil::Params& p) {
   SimConfig c;
@@ -60,6 +74,14 @@ SimConfig readSimConfig(const rosutil::Params& p) {
   return c;
 }
 
+// The keys readDriverParams reads; keep in step with it.
+std::set<std::string> driverKeys(bool simulated) {
+  std::set<std::string> keys{"joint_state_rate", "actuator_state_rate", "touch_rate", "object_rate", "marker_rate",
+                             "realtime_priority", "lockstep_nice", "diagnostics_period", "never_commanded_grace"};
+  if (simulated) keys.insert({"realtime", "start_paused", "physics_priority"});
+  return keys;
+}
+
 DriverParams readDriverParams(const rosutil::Params& p, bool simulated) {
   DriverParams out;
   if (simulated) {
@@ -88,6 +110,11 @@ DriverParams readDriverParams(const rosutil::Params& p, bool simulated) {
 
 std::unique_ptr<RobotDriver> makeSimDriver(ros::NodeHandle nh, ros::NodeHandle pnh) {
   const rosutil::Params p(pnh);
+  // A misspelt key would silently run at its default: refuse every key nobody reads.
+  std::set<std::string> keys = driverKeys(true);
+  keys.insert(kSimConfigKeys.begin(), kSimConfigKeys.end());
+  p.checkKeys("", keys);
+  p.checkKeys("sensors", kSensorKeys);
   const SimConfig config = readSimConfig(p);
   DriverParams params = readDriverParams(p, true);
   std::unique_ptr<Robot> robot;

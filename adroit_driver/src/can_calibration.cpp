@@ -1,12 +1,11 @@
 #include "adroit_driver/can_calibration.h"
 
+#include "adroit_core/bounded_file.h"
+
 #include <yaml-cpp/yaml.h>
 
-#include <cerrno>
 #include <cmath>
 #include <cstdlib>
-#include <cstring>
-#include <fstream>
 #include <sstream>
 #include <stdexcept>
 #include <unordered_map>
@@ -154,11 +153,13 @@ Calibration parseCalibration(const std::string& text, const std::string& source,
 
 Calibration loadCalibration(const std::string& path, const std::vector<std::string>& joint_names,
                             const std::vector<std::string>& cylinder_names) {
-  std::ifstream file(path);
-  if (!file) throw std::invalid_argument("calibration " + path + ": cannot open (" + std::strerror(errno) + ")");
-  std::stringstream text;
-  text << file.rdbuf();
-  return parseCalibration(text.str(), path, joint_names, cylinder_names);
+  std::string text;
+  try {  // a path from a parameter: a FIFO, device or huge file must not hang or exhaust the node
+    text = readBoundedFile(path, kMaxCalibrationFileBytes);
+  } catch (const FileError& e) {
+    throw std::invalid_argument(std::string("calibration ") + e.what());
+  }
+  return parseCalibration(text, path, joint_names, cylinder_names);
 }
 
 std::string validateCalibration(const Calibration& c, const std::vector<std::string>& joint_names,

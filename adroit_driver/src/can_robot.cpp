@@ -11,6 +11,7 @@
 #include <stdexcept>
 
 #include "adroit_driver/can_calibration.h"
+#include "adroit_core/number_text.h"
 
 namespace adroit::driver {
 
@@ -32,11 +33,7 @@ constexpr int kReadRoundsPerStep = 8;  // bounded: a flooding bus cannot hold th
 constexpr std::size_t kMaxBuses = 16;
 constexpr const char* kForcesOnHardware = "tendon force command rejected: the hardware has valves (pneumatic mode)";
 
-std::string format(double v) {
-  std::ostringstream out;
-  out << v;
-  return out.str();
-}
+using adroit::shortNumber;
 
 std::string hex(std::uint32_t id) {
   char text[16];
@@ -142,10 +139,10 @@ std::string validate(const CanRobotConfig& c) {
   if (c.silent_periods < 3 || c.silent_periods > 20)
     return describeBad("~silent_periods", "in [3, 20]", c.silent_periods);
   if (!positiveFinite(c.joint_velocity_cutoff) || c.joint_velocity_cutoff > 0.5 / c.joint_period)
-    return describeBad("~joint_velocity_cutoff", "in (0, " + format(0.5 / c.joint_period) + "] Hz (Nyquist)",
+    return describeBad("~joint_velocity_cutoff", "in (0, " + shortNumber(0.5 / c.joint_period) + "] Hz (Nyquist)",
                        c.joint_velocity_cutoff);
   if (!positiveFinite(c.length_rate_cutoff) || c.length_rate_cutoff > 0.5 / c.sensor_period)
-    return describeBad("~length_rate_cutoff", "in (0, " + format(0.5 / c.sensor_period) + "] Hz (Nyquist)",
+    return describeBad("~length_rate_cutoff", "in (0, " + shortNumber(0.5 / c.sensor_period) + "] Hz (Nyquist)",
                        c.length_rate_cutoff);
   if (!(c.supply_pressure > 150e3 && c.supply_pressure <= 1e6))
     return describeBad("~supply_pressure", "in (150e3, 1e6] Pa absolute", c.supply_pressure);
@@ -397,7 +394,7 @@ void CanRobot::startUp() {
         if (s.last == kNever) streams += (streams.empty() ? "" : ", ") + streamName(s.id);
       if (!streams.empty()) add("streams never heard: " + streams);
       if (missing.empty()) add("no complete sample (frames of one sample with one sequence number)");
-      throw std::runtime_error("CAN start-up: within " + format(config_.startup_timeout) + " s: " + missing);
+      throw std::runtime_error("CAN start-up: within " + shortNumber(config_.startup_timeout) + " s: " + missing);
     }
     if (t >= next_heartbeat_) {
       sendHeartbeats();
@@ -1127,9 +1124,9 @@ std::string CanRobot::persistingCause() const {
     if (node.bad_version >= 0)
       causes.push_back(nodeName(number) + " speaks protocol version " + std::to_string(node.bad_version));
     else if (heartbeatMissing(node, t))
-      causes.push_back("no heartbeat from " + nodeName(number) + " for " + format(t - node.last_heartbeat) + " s");
+      causes.push_back("no heartbeat from " + nodeName(number) + " for " + shortNumber(t - node.last_heartbeat) + " s");
     else if (node.state == can::NodeState::kFault)
-      causes.push_back(nodeName(number) + " is in the fault state (reset it)");
+      causes.push_back(nodeName(number) + " is in the fault state (power-cycle it)");
   }
   for (const Stream& s : streams_) {
     if (buses_[s.bus].down != BusDown::kUp) continue;  // said above
@@ -1306,7 +1303,7 @@ std::string CanRobot::faultText(const SafetyEvent& e, const FaultDetail* d) cons
         std::string where = open == std::string::npos ? "" : name.substr(open + 2, name.size() - open - 3);
         const int s = id < stream_of_id_.size() ? stream_of_id_[id] : -1;
         if (s >= 0) where += ", bus '" + buses_[streams_[s].bus].name + "'";
-        return name.substr(0, open) + " silent for " + format(d->value) + " s (" + where + ")";
+        return name.substr(0, open) + " silent for " + shortNumber(d->value) + " s (" + where + ")";
       }
       if (kind == FaultKind::kNoReading) {
         std::string what = "field " + std::to_string(d->channel);
@@ -1329,7 +1326,7 @@ std::string CanRobot::faultText(const SafetyEvent& e, const FaultDetail* d) cons
         return nodeName(e.index) + on + " speaks protocol version " + std::to_string(d->code) + ", this driver " +
                std::to_string(can::kProtocolVersion);
       if (kind == FaultKind::kHeartbeatMissing)
-        return "heartbeat of " + nodeName(e.index) + on + " missing for " + format(d->value) + " s";
+        return "heartbeat of " + nodeName(e.index) + on + " missing for " + shortNumber(d->value) + " s";
       return "heartbeat of " + nodeName(e.index) + on + " missing or wrong";
     }
     case FaultSource::kBoard: {
@@ -1371,7 +1368,7 @@ std::string CanRobot::faultText(const SafetyEvent& e, const FaultDetail* d) cons
 }
 
 std::string CanRobot::describe(const SafetyEvent& e) const {
-  const std::string when = " (clock " + format(e.clock) + " s, event " + std::to_string(e.sequence) + ")";
+  const std::string when = " (clock " + shortNumber(e.clock) + " s, event " + std::to_string(e.sequence) + ")";
   switch (e.cause) {
     case SafeCause::kEstop:
       if (e.index < 0) return "e-stop" + when;
@@ -1380,7 +1377,7 @@ std::string CanRobot::describe(const SafetyEvent& e) const {
     case SafeCause::kWatchdog: {
       const std::string name =
           e.cylinder >= 0 && e.cylinder < static_cast<int>(cylinders_.size()) ? actuators_.names()[e.cylinder] : "?";
-      return "watchdog: '" + name + "' not commanded for " + format(config_.watchdog_timeout) + " s" + when;
+      return "watchdog: '" + name + "' not commanded for " + shortNumber(config_.watchdog_timeout) + " s" + when;
     }
     case SafeCause::kFault: {
       FaultDetail detail;
@@ -1456,7 +1453,7 @@ void CanRobot::addDiagnostics(DiagnosticValues* values) const {
     const Node& node = nodes_[number];
     std::string text = node.last_heartbeat == kNever ? std::string("never heard")
                                                      : std::string(can::nodeStateName(node.state)) + ", heartbeat " +
-                                                           format(t - node.last_heartbeat) + " s ago";
+                                                           shortNumber(t - node.last_heartbeat) + " s ago";
     if (node.bad_version >= 0) text += ", protocol version " + std::to_string(node.bad_version);
     if (node.flags & can::kFlagEstopInput) text += ", e-stop input held";
     if (node.flags & can::kFlagWatchdog) text += ", command watchdog tripped";

@@ -1,8 +1,12 @@
 #include "adroit_driver/command_check.h"
 
 #include <cmath>
+#include <cstdio>
+#include "adroit_core/number_text.h"
 
 namespace adroit::driver {
+
+using adroit::shortNumber;  // a rejected 1e308 is logged as "1e+308", not as 309 digits
 
 const char* verdictName(CommandVerdict v) {
   switch (v) {
@@ -75,9 +79,9 @@ void checkCommand(const NameIndex& actuators, const std::vector<std::string>& na
     if (!std::isfinite(v))
       return fail(CommandVerdict::kNotFinite, "non-finite value for '" + actuators.name(a) + "'");
     if (v < limits.lower[a] || (v > limits.upper[a] && !limits.clamp_above))
-      return fail(CommandVerdict::kOutOfRange, "value " + std::to_string(v) + " for '" + actuators.name(a) +
-                                                   "' outside [" + std::to_string(limits.lower[a]) + ", " +
-                                                   std::to_string(limits.upper[a]) + "]");
+      return fail(CommandVerdict::kOutOfRange, "value " + shortNumber(v) + " for '" + actuators.name(a) +
+                                                   "' outside [" + shortNumber(limits.lower[a]) + ", " +
+                                                   shortNumber(limits.upper[a]) + "]");
     if (v > limits.upper[a]) {
       out.value[k] = limits.upper[a];
       out.verdict = CommandVerdict::kClamped;

@@ -5,6 +5,7 @@
 #include <limits>
 #include <sstream>
 #include <stdexcept>
+#include "adroit_core/number_text.h"
 
 namespace adroit::driver {
 
@@ -30,11 +31,7 @@ std::string joinNames(const NameIndex& index) {
 
 constexpr double kQuaternionTolerance = 1e-6;  // |norm - 1| of a quaternion a reset accepts
 
-std::string format(double v) {
-  std::ostringstream out;
-  out << v;
-  return out.str();
-}
+using adroit::shortNumber;
 
 bool allFinite(const std::vector<double>& v) {
   return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x); });
@@ -262,14 +259,14 @@ std::string SimulatedRobot::faultText(const SafetyEvent& e) const {
 }
 
 std::string SimulatedRobot::describe(const SafetyEvent& e) const {
-  const std::string when = " (clock " + format(e.clock) + " s, event " + std::to_string(e.sequence) + ")";
+  const std::string when = " (clock " + shortNumber(e.clock) + " s, event " + std::to_string(e.sequence) + ")";
   switch (e.cause) {
     case SafeCause::kEstop: return "e-stop" + when;
     case SafeCause::kWatchdog: {
       const std::string name = e.cylinder >= 0 && e.cylinder < static_cast<int>(cylinders_.size())
                                    ? cylinderNames()[e.cylinder]
                                    : "?";
-      return "watchdog: '" + name + "' not commanded for " + format(config_.watchdog_timeout) + " s" + when;
+      return "watchdog: '" + name + "' not commanded for " + shortNumber(config_.watchdog_timeout) + " s" + when;
     }
     case SafeCause::kFault: return "fault: " + faultText(e) + when;
     case SafeCause::kNone: break;
@@ -584,15 +581,15 @@ bool SimulatedRobot::checkResetState(const std::vector<double>& qpos, const std:
       case mjJNT_FREE: {
         const double distance = std::hypot(q[0], q[1], q[2]);  // no overflow to inf for 1e300
         if (distance > config_.max_reset_distance)
-          return fail(name() + " position is " + format(distance) + " m from the origin, beyond max_reset_distance " +
-                      format(config_.max_reset_distance) + " m");
+          return fail(name() + " position is " + shortNumber(distance) + " m from the origin, beyond max_reset_distance " +
+                      shortNumber(config_.max_reset_distance) + " m");
         const double norm = unitQuaternion(q + 3);
-        if (norm >= 0) return fail(name() + " quaternion has norm " + format(norm) + ", must be 1");
+        if (norm >= 0) return fail(name() + " quaternion has norm " + shortNumber(norm) + ", must be 1");
         break;
       }
       case mjJNT_BALL: {
         const double norm = unitQuaternion(q);
-        if (norm >= 0) return fail(name() + " quaternion has norm " + format(norm) + ", must be 1");
+        if (norm >= 0) return fail(name() + " quaternion has norm " + shortNumber(norm) + ", must be 1");
         break;
       }
       default: {  // hinge or slide
@@ -600,18 +597,18 @@ bool SimulatedRobot::checkResetState(const std::vector<double>& qpos, const std:
         const double margin = config_.reset_range_margin * (hi - lo);  // soft limits (sim_config.h)
         const char* unit = m->jnt_type[j] == mjJNT_HINGE ? " rad" : " m";
         if (m->jnt_limited[j] && !(q[0] >= lo - margin && q[0] <= hi + margin))
-          return fail(name() + " qpos " + format(q[0]) + unit + " outside its range [" + format(lo) + ", " + format(hi) +
-                      "]" + unit + " (by more than reset_range_margin " + format(config_.reset_range_margin) +
+          return fail(name() + " qpos " + shortNumber(q[0]) + unit + " outside its range [" + shortNumber(lo) + ", " + shortNumber(hi) +
+                      "]" + unit + " (by more than reset_range_margin " + shortNumber(config_.reset_range_margin) +
                       " of it)");
         if (!(std::abs(q[0]) <= mjMAXVAL))  // unlimited: at least what MuJoCo's own check accepts
-          return fail(name() + " qpos " + format(q[0]) + unit + " beyond MuJoCo's bound " + format(mjMAXVAL));
+          return fail(name() + " qpos " + shortNumber(q[0]) + unit + " beyond MuJoCo's bound " + shortNumber(mjMAXVAL));
       }
     }
   }
   for (int i = 0; i < m->nv && !qvel.empty(); ++i)
     if (!(std::abs(qvel[i]) <= config_.max_reset_velocity))
-      return fail("joint '" + jointName(m->dof_jntid[i]) + "' qvel[" + std::to_string(i) + "] " + format(qvel[i]) +
-                  " beyond max_reset_velocity " + format(config_.max_reset_velocity) + " (rad/s or m/s)");
+      return fail("joint '" + jointName(m->dof_jntid[i]) + "' qvel[" + std::to_string(i) + "] " + shortNumber(qvel[i]) +
+                  " beyond max_reset_velocity " + shortNumber(config_.max_reset_velocity) + " (rad/s or m/s)");
   return true;
 }
 
@@ -632,7 +629,7 @@ bool SimulatedRobot::resetToState(const std::vector<double>& qpos, const std::ve
                 std::to_string(cylinders_.size()) + " cylinders");
   if (!allFinite(qpos) || !allFinite(qvel) || !allFinite(pressure)) return fail("state contains NaN or Inf");
   for (double p : pressure)
-    if (p < 1e3 || p > 2e6) return fail("pressure " + std::to_string(p) + " Pa outside [1e3, 2e6] Pa absolute");
+    if (p < 1e3 || p > 2e6) return fail("pressure " + shortNumber(p) + " Pa outside [1e3, 2e6] Pa absolute");
   if (!checkResetState(qpos, qvel, error)) return false;
   std::string ignored;
   resetToKeyframe("", &ignored);  // model default for whatever is not given
@@ -664,8 +661,8 @@ bool SimulatedRobot::checkPose(const std::array<double, 3>& position, const std:
   if (*norm < 1e-6) return fail("orientation is not a quaternion (norm ~ 0)");
   const double distance = std::hypot(position[0], position[1], position[2]);
   if (distance > config_.max_reset_distance)
-    return fail("position is " + format(distance) + " m from the origin, beyond max_reset_distance " +
-                format(config_.max_reset_distance) + " m");
+    return fail("position is " + shortNumber(distance) + " m from the origin, beyond max_reset_distance " +
+                shortNumber(config_.max_reset_distance) + " m");
   return true;
 }
 
@@ -742,8 +739,8 @@ bool SimulatedRobot::setObjectPose(const std::array<double, 3>& position, const 
   for (const auto* velocity : {&linear, &angular})
     for (double v : *velocity)
       if (std::abs(v) > config_.max_reset_velocity)
-        return fail(std::string(velocity == &linear ? "linear" : "angular") + " velocity component " + format(v) +
-                    " beyond max_reset_velocity " + format(config_.max_reset_velocity) + " (m/s or rad/s)");
+        return fail(std::string(velocity == &linear ? "linear" : "angular") + " velocity component " + shortNumber(v) +
+                    " beyond max_reset_velocity " + shortNumber(config_.max_reset_velocity) + " (m/s or rad/s)");
   mjData* d = data_.get();
   double* q = d->qpos + object_qpos_;
   for (int k = 0; k < 3; ++k) q[k] = position[k];

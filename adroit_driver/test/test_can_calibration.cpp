@@ -5,8 +5,15 @@
 #include <stdlib.h>
 #include <unistd.h>
 
+#include <fcntl.h>
+#include <sys/stat.h>
+
+#include <chrono>
 #include <cstdio>
 #include <fstream>
+#include <future>
+#include <memory>
+#include <thread>
 #include <string>
 #include <vector>
 
@@ -63,6 +70,16 @@ class Calibrations : public ::testing::Test {
       EXPECT_EQ(what.find('\n'), std::string::npos) << what;
       EXPECT_EQ(what.rfind("calibration " + path + ": ", 0), 0u) << what;
       return what.substr(("calibration " + path + ": ").size());
+    }
+    return "";
+  }
+
+  // The whole one-line error loading `path` gives ("" if it loads).
+  std::string errorAt(const std::string& path) {
+    try {
+      load(path);
+    } catch (const std::invalid_argument& e) {
+      return e.what();
     }
     return "";
   }
@@ -176,6 +193,33 @@ TEST_F(Calibrations, BadValuesAreRefusedWithTheirPathAndValue) {
             "length.A_ARJ3_flex.offset must be within +-0.02 m, got 0.03");
   EXPECT_EQ(error("supply: {offset: -5e4, gain: 1}\n"), "");  // the bounds are inclusive
   EXPECT_EQ(error("supply: {offset: -5.1e4}\n"), "supply.offset must be within +-50000 Pa, got -5.1e4");
+}
+
+// The path comes from a parameter: only a regular file of sane size is read.
+TEST_F(Calibrations, AFifoIsRefusedWithoutBlocking) {
+  const std::string fifo = dir_ + "/calibration.fifo";
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  files_.push_back(fifo);
+  auto done = std::make_shared<std::promise<std::string>>();
+  std::future<std::string> error = done->get_future();
+  std::thread([this, fifo, done] { done->set_value(errorAt(fifo)); }).detach();
+  if (error.wait_for(std::chrono::seconds(5)) != std::future_status::ready) {
+    close(open(fifo.c_str(), O_WRONLY));  // a writer unblocks the reader, so the test can end
+    error.wait();
+    FAIL() << "loading a FIFO blocked";
+  }
+  EXPECT_EQ(error.get(), "calibration " + fifo + ": not a regular file (a FIFO)");
+}
+
+TEST_F(Calibrations, ADirectoryIsRefused) {
+  EXPECT_EQ(errorAt(dir_), "calibration " + dir_ + ": not a regular file (a directory)");
+}
+
+TEST_F(Calibrations, AFileOverTheLimitIsRefusedNamingIt) {
+  // Valid YAML (the identity followed by comments): only its size is wrong.
+  const std::string padding(2 * 1024 * 1024, '#');
+  const std::string path = write("version: 1\n" + padding + "\n");
+  EXPECT_EQ(errorAt(path), "calibration " + path + ": 2 MB, over the limit of 1 MB");
 }
 
 TEST_F(Calibrations, ValidateChecksACalibrationBuiltInCode) {

@@ -56,11 +56,14 @@ class Characterise(unittest.TestCase):
         shutil.rmtree(cls.dir, ignore_errors=True)
 
     def test_1_quick_run(self):
-        out = os.path.join(self.dir, "quick")
+        # The directory is a parameter: a shell would run what its quotes smuggle in.
+        injected = os.path.join(self.dir, "INJECTED")
+        out = os.path.join(self.dir, "quick'; touch %s; echo '$(touch %s)" % (injected, injected))
         probe = MachineProbe()  # the figures are measured in real time, beside the machine's own speed
         code, log = run_tool("characterise_quick", out, "_quick:=true")
         probe.stop()
         self.assertEqual(code, 0, log)
+        self.assertFalse(os.path.exists(injected), "a shell ran a command from ~output_dir")
         for name in ["report.md", "summary.csv"] + ["%s%s.csv" % (e, s) for e in EXPERIMENTS
                                                    for s in ("", "_joints", "_actuators", "_commands")]:
             self.assertTrue(os.path.getsize(os.path.join(out, name)) > 0, name)

@@ -69,6 +69,15 @@ TEST_F(CommandCheck, VoltsOutOfRangeAreRejectedNotClamped) {
   EXPECT_EQ(checkCommand(names_, {}, {0}, {5.0}, volts_).verdict, CommandVerdict::kAccepted);
 }
 
+// A rejected value reaches a throttled log line: it must stay one short line.
+TEST_F(CommandCheck, AHugeValueIsNamedShortly) {
+  const auto c = checkCommand(names_, {}, {0}, {1e308}, volts_);
+  ASSERT_EQ(c.verdict, CommandVerdict::kOutOfRange);
+  EXPECT_NE(c.error.find("1e+308"), std::string::npos) << c.error;
+  EXPECT_NE(c.error.find("[-5, 5]"), std::string::npos) << c.error;
+  EXPECT_LT(c.error.size(), 80u) << c.error;
+}
+
 TEST_F(CommandCheck, ForcesAboveMaximumAreClampedPerActuatorNegativeRejected) {
   const auto c = checkCommand(names_, {}, {0, 1}, {45.0, 45.0}, force_);
   ASSERT_EQ(c.verdict, CommandVerdict::kClamped);

@@ -5,20 +5,21 @@ import subprocess
 import tempfile
 import unittest
 
+import rospkg
 import rospy
 import rostest
 
 
-def run_driver(name, *params):
-    cmd = ["rosrun", "adroit_driver", "adroit_sim", "__name:=" + name] + list(params)
+def run_driver(name, *params, node="adroit_sim"):
+    cmd = ["rosrun", "adroit_driver", node, "__name:=" + name] + list(params)
     proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, timeout=60, text=True)
     fatal = [l for l in (proc.stdout + proc.stderr).splitlines() if "FATAL" in l]
     return proc.returncode, fatal
 
 
 class Params(unittest.TestCase):
-    def check(self, name, params, *expected):
-        code, fatal = run_driver(name, *params)
+    def check(self, name, params, *expected, node="adroit_sim"):
+        code, fatal = run_driver(name, *params, node=node)
         self.assertNotEqual(code, 0)
         self.assertEqual(len(fatal), 1, fatal)
         for text in expected:
@@ -47,6 +48,28 @@ class Params(unittest.TestCase):
         self.check("bad_priority", ["_realtime_priority:=120"], "bad parameter /bad_priority/realtime_priority:", "[0, 99]")
         self.check("bad_physics", ["_physics_priority:=-1"], "bad parameter /bad_physics/physics_priority:", "[0, 99]")
         self.check("bad_nice", ["_lockstep_nice:=5"], "bad parameter /bad_nice/lockstep_nice:", "[-20, 0]")
+
+    # A misspelt key would run at its default without a word: every node refuses it, naming
+    # the key it resembles.
+    def test_misspelt_keys_are_refused(self):
+        for node in ("adroit_sim", "adroit_hw"):
+            name = "misspelt_" + node
+            self.check(name, ["_watchdog_timout:=0.5"], "bad parameter /%s/watchdog_timout: unknown parameter "
+                       "(did you mean watchdog_timeout?)" % name, node=node)
+        self.check("misspelt_sensor", ["_sensors/joint_nois_std:=0.01"], "bad parameter /misspelt_sensor/sensors/"
+                   "joint_nois_std: unknown parameter (did you mean joint_noise_std?)")
+        self.check("misspelt_emulator", ["_sensor_realsim:=false"], "bad parameter /misspelt_emulator/sensor_realsim: "
+                   "unknown parameter (did you mean sensor_realism?)", node="adroit_can_emulator")
+
+    def test_every_key_of_the_shipped_configs_is_known(self):
+        # Keys are checked in sorted order: a refusal of the last one means all others passed.
+        config = os.path.join(rospkg.RosPack().get_path("adroit_driver"), "config")
+        for node, yaml, key in (("adroit_sim", "sim.yaml", "zz_unknown"), ("adroit_sim", "sim.yaml", "sensors/zz_unknown"),
+                                ("adroit_hw", "hardware.yaml", "zz_unknown"),
+                                ("adroit_can_emulator", "emulator.yaml", "zz_unknown")):
+            name = "config_" + node + "_" + key.replace("/", "_")
+            subprocess.run(["rosparam", "load", os.path.join(config, yaml), "/" + name], check=True, timeout=30)
+            self.check(name, ["_%s:=1" % key], "bad parameter /%s/%s: unknown parameter" % (name, key), node=node)
 
 
 if __name__ == "__main__":

@@ -140,6 +140,10 @@ TEST(SimulatedRobot, ResetToKeyframeAndToStateRestoreExactly) {
   EXPECT_NE(error.find("rest"), std::string::npos) << error;  // lists the known ones
   EXPECT_FALSE(robot.resetToState({1.0, 2.0}, {}, {}, &error));
   EXPECT_FALSE(robot.resetToState({}, {}, std::vector<double>(48, std::nan("")), &error));
+  // A huge pressure is named shortly (%g), not in 309 digits.
+  EXPECT_FALSE(robot.resetToState({}, {}, std::vector<double>(48, 1e308), &error));
+  EXPECT_NE(error.find("1e+308"), std::string::npos) << error;
+  EXPECT_LT(error.size(), 80u) << error;
 }
 
 TEST(SimulatedRobot, SetObjectPoseTakesWorldFrameVelocities) {

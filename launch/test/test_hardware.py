@@ -5,14 +5,17 @@ resolution (through a non-identity calibration); a valve command reaches the emu
 and comes back as pressure; the command watchdog, the e-stop and every injected fault take the
 robot to its safe state and are reported, without a crash; a bus fault needs /adroit/recover."""
 import math
+import re
 import time
 import unittest
 
+import rosservice
 import rospy
 import rostest
 from adroit_msgs.msg import ActuatorStates, ValveCommand
 from adroit_msgs.srv import InjectFault
 from diagnostic_msgs.msg import DiagnosticArray
+from rosgraph_msgs.msg import Log
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
@@ -54,6 +57,9 @@ class HardwareEmulated(unittest.TestCase):
         cls.safe = Latest("/adroit/safe_state", Bool)
         cls.driver_status = {}
         rospy.Subscriber("/adroit/diagnostics", DiagnosticArray, cls.on_diagnostics)
+        cls.fault_lines = []  # the driver's error lines on a fault: they tell the operator what to call
+        rospy.Subscriber("/rosout", Log, lambda m: cls.fault_lines.append(m.msg)
+                         if m.name == "/adroit_hw" and m.level == Log.ERROR and "safe state:" in m.msg else None)
         cls.valves = rospy.Publisher("/adroit/valve_command", ValveCommand, queue_size=10)
         for name in ("/adroit/estop", "/adroit/estop_release", "/adroit/recover", "/adroit_can_emulator/inject_fault"):
             rospy.wait_for_service(name, timeout=60)
@@ -191,6 +197,23 @@ class HardwareEmulated(unittest.TestCase):
         n = len(self.joints.messages)
         time.sleep(0.2)
         self.assertGreater(len(self.joints.messages), n + 50)
+
+    def test_6_the_fault_text_names_only_services_the_hardware_obeys(self):
+        self.assertTrue(self.fault_lines, "no fault line from adroit_hw after the injected faults")
+        offered = {s[len("/adroit/"):] for s in rosservice.get_service_list() if s.startswith("/adroit/")}
+        for line in set(self.fault_lines):
+            remedy = line.rsplit("; ", 1)[-1]  # what to do, after the fault's description
+            named = re.findall(r"/adroit/(\w+)", remedy)
+            self.assertTrue(named, line)
+            # A service meant but not named in full ("reset, then ...") is still an instruction.
+            bare = set(re.findall(r"\w+", re.sub(r"/adroit/\w+", "", remedy))) & offered
+            self.assertFalse(bare, "%s: names %s without its path" % (line, bare))
+            for name in named:
+                self.assertIn(name, offered, line)
+                service = "/adroit/" + name
+                kind = rosservice.get_service_class_by_name(service)
+                answer = rospy.ServiceProxy(service, kind)(kind._request_class())
+                self.assertNotIn("only in simulation", getattr(answer, "message", ""), "%s: %s" % (line, service))
 
 
 if __name__ == "__main__":

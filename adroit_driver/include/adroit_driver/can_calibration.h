@@ -3,6 +3,7 @@
 // offset and a gain (can::Affine: physical = gain * bus value + offset). ROS-free.
 #pragma once
 
+#include <cstddef>
 #include <string>
 #include <vector>
 
@@ -18,6 +19,9 @@ constexpr double kMaxJointOffset = 0.5;         // rad
 constexpr double kMaxPressureOffset = 50e3;     // Pa (pressure and supply)
 constexpr double kMaxLengthOffset = 0.02;       // m
 constexpr int kCalibrationVersion = 1;
+// A complete file of the 28-joint, 48-cylinder robot is about 7 kB: anything near this limit
+// is not a calibration.
+constexpr std::size_t kMaxCalibrationFileBytes = 1024 * 1024;
 
 // Reads `path`:
 //   version: 1                                   # optional
@@ -25,7 +29,9 @@ constexpr int kCalibrationVersion = 1;
 //   pressure: {<cylinder>: {offset: <Pa>, gain: <g>}, ...}
 //   length:   {<cylinder>: {offset: <m>, gain: <g>}, ...}
 //   supply:   {offset: <Pa>, gain: <g>}
-// Every section, entry and field is optional: what is not listed is the identity. Throws
+// Every section, entry and field is optional: what is not listed is the identity. Only a
+// regular file of at most kMaxCalibrationFileBytes is read (a FIFO or device is refused
+// without blocking). Throws
 // std::invalid_argument with one line naming the file, the key path and the value, e.g.
 // "calibration /x.yaml: pressure.A_FFJ3_flex.gain must be in [0.5, 2], got 7".
 Calibration loadCalibration(const std::string& path, const std::vector<std::string>& joint_names,

@@ -6,16 +6,11 @@
 
 #include "adroit_core/nearest_name.h"
 #include "adroit_description/scenes.h"
+#include "adroit_core/number_text.h"
 
 namespace adroit::rosutil {
 
-namespace {
-std::string text(double x) {
-  std::ostringstream o;
-  o << x;
-  return o.str();
-}
-}  // namespace
+using adroit::shortNumber;
 
 void Params::fail(const std::string& key, const std::string& what) const {
   throw ParameterError("bad parameter " + name(key) + ": " + what);
@@ -31,7 +26,7 @@ double Params::number(const std::string& key, double fallback) const {
 
 double Params::number(const std::string& key, double fallback, double lo, double hi) const {
   const double x = number(key, fallback);
-  if (!(x >= lo && x <= hi)) fail(key, "must be in [" + text(lo) + ", " + text(hi) + "], got " + text(x));
+  if (!(x >= lo && x <= hi)) fail(key, "must be in [" + shortNumber(lo) + ", " + shortNumber(hi) + "], got " + shortNumber(x));
   return x;
 }
 

@@ -81,6 +81,8 @@ class MpcKill(unittest.TestCase):
             return self.safe or (fresh and all(c == EXHAUST for c in fresh[-1].command))
 
         self.wait_until(lambda: not alive(driver) or exhausted(), REFERENCE_TIMEOUT + MARGIN)
+        print("mpc_kill: valves at exhaust (or safe state) %.3f s after the MPC was killed" %
+              (time.monotonic() - killed), flush=True)
         self.assertTrue(alive(driver), "the driver died with the MPC")
         self.assertTrue(exhausted(), "valves not at exhaust (and no safe state) %.2f s after the MPC died: %s" %
                         (REFERENCE_TIMEOUT + MARGIN, self.states[-1][1].command if self.states else "no states"))

@@ -3,10 +3,13 @@
 #include <cstring>
 #include <sstream>
 
+#include "adroit_core/bounded_file.h"
+
 namespace adroit {
 namespace {
 
 constexpr int kErrorSize = 1000;
+constexpr size_t kMaxModelFileBytes = 256 * kMiB;
 
 std::string trimmed(const char* text) {
   std::string s(text);
@@ -25,6 +28,13 @@ bool endsWith(const std::string& s, const std::string& suffix) {
 }  // namespace
 
 LoadedModel loadModelFile(const std::string& path) {
+  // A model path comes from a parameter: a FIFO would block MuJoCo's reader for good, a device
+  // feed it without end. The largest scene is ~100 kB of MJCF, a compiled one a few MB.
+  try {
+    requireRegularFile(path, kMaxModelFileBytes);
+  } catch (const FileError& e) {
+    throw ModelLoadError(std::string("cannot load model: ") + e.what());
+  }
   char error[kErrorSize] = "";
   mjModel* m = nullptr;
   if (endsWith(path, ".mjb")) {

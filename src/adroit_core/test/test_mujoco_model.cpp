@@ -1,4 +1,7 @@
 #include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 
 #include <cstdio>
 #include <fstream>
@@ -49,6 +52,21 @@ TEST(MujocoModel, MissingFileNamesThePath) {
   } catch (const adroit::ModelLoadError& e) {
     EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
   }
+}
+
+TEST(MujocoModel, AFifoOrDeviceIsRefusedBeforeMujocoReadsIt) {
+  const std::string fifo = ::testing::TempDir() + "/model_fifo_" + std::to_string(getpid()) + ".xml";
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  for (const std::string& path : {fifo, std::string("/dev/zero")}) {
+    try {
+      adroit::loadModelFile(path);
+      ADD_FAILURE() << path << " was loaded";
+    } catch (const adroit::ModelLoadError& e) {
+      EXPECT_NE(std::string(e.what()).find("cannot load model: " + path + ": not a regular file"), std::string::npos)
+          << e.what();
+    }
+  }
+  unlink(fifo.c_str());
 }
 
 TEST(MujocoModel, LoadsFromFile) {

@@ -563,6 +563,16 @@ def keypad_xml(planning=False):
     return base, labels
 
 
+# The tube scene's tube at rest on the table (centre at its radius), along world x, under the
+# proximal phalanges of the zero-pose hand: 5.5 mm clear of the hand. Its earlier place (y
+# -0.16) was inside the middle and distal phalanges (up to 30 mm deep: the fingertips of the
+# tilted zero-pose hand are 7-13 mm above the table), so the first step shot it away at about
+# 0.26 m/s. In front of the fingertips is out of their reach (at table height they reach
+# y <= -0.117 over all joint angles), so under the fingers is the one place where the fingers
+# start above the tube, as in thesis 10.4 ("the fingers keep tapping on the top of the tube").
+TUBE_ON_TABLE = (0.0, -0.23, 0.022)
+
+
 def scenes():
     pad, _ = keypad_xml()
     plan_pad, _ = keypad_xml(planning=True)
@@ -574,11 +584,11 @@ def scenes():
         Scene("tube", "in-hand rotation / pickup of a heavy coffee-bean tube; hand mounted "
               "about 30 deg to the horizontal, palm up; finger-table contact disabled (thesis 10.2)",
               False, (0, -0.55, 0.25), PALM_UP_TILTED_30,
-              objects=object_body((0, -0.16, 0.022),
+              objects=object_body(TUBE_ON_TABLE,
                                   '<geom name="C_object" type="capsule" size="0.022 0.12" '
                                   'quat="0.70711 0 0.70711 0" mass="0.30" rgba="0.45 0.3 0.15 1" '
                                   'contype="3" conaffinity="3" condim="3"/>'),
-              object_qpos=[0, -0.16, 0.022, 1, 0, 0, 0], table_touches_hand=False),
+              object_qpos=list(TUBE_ON_TABLE) + [1, 0, 0, 0], table_touches_hand=False),
         Scene("bottle", "dynamic manipulation: a bottle dropped onto the palm-up hand", False,
               (0, -0.55, 0.20), PALM_UP,
               objects=object_body((0.007, -0.19, 0.31),

@@ -434,6 +434,8 @@ DriverRollouts::DriverRollouts(ros::NodeHandle& nh, const std::vector<std::strin
 
 std::vector<double> DriverRollouts::jointRanges() const { return adroit::jointRanges(model_.get(), joints_); }
 
+ObjectGeometry DriverRollouts::objectGeometry() const { return adroit::objectGeometry(model_.get()); }
+
 Eigen::VectorXd DriverRollouts::initialState(const TrainingTask& task, const StateLayout& layout) {
   DriverConnection& d = *drivers_.front();
   std::string error;

@@ -134,6 +134,7 @@ class DriverRollouts : public RolloutBackend {
   std::vector<std::string> cylinderNames() const override { return cylinders_; }
   bool hasObject() const override { return has_object_; }
   std::vector<double> jointRanges() const override;
+  ObjectGeometry objectGeometry() const override;
   Eigen::VectorXd initialState(const TrainingTask& task, const StateLayout& layout) override;
   std::vector<RolloutResult> run(const TrainingTask& task, const StateLayout& layout, const LgController& controller,
                                  const std::vector<RolloutRequest>& requests, const std::atomic<bool>& cancel) override;

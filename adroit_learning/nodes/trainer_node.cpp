@@ -382,7 +382,7 @@ class TrainerNode {
     const std::string mismatch =
         policyMismatch(e.policy, path, layout.joint_names, layout.cylinder_names, layout.describe());
     if (!mismatch.empty()) throw std::runtime_error(mismatch);
-    const TrajectoryCost cost(task, layout, backend->initialState(task, layout));
+    const TrajectoryCost cost(task, layout, backend->initialState(task, layout), backend->objectGeometry());
     const RolloutRequest mean{Eigen::MatrixXd::Zero(layout.nu(), task.horizon), {}};
     const std::vector<RolloutResult> results = backend->run(task, layout, e.controller, {mean}, execute_cancel_);
     if (!results.front().ok) throw std::runtime_error("rollout failed: " + results.front().error);

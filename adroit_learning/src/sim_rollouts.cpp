@@ -30,7 +30,35 @@ int jointId(const mjModel* model, const std::string& name) {
   return j;
 }
 
+// The free object's quaternion (w x y z) from the task's yaw.
+void setObjectYaw(const mjModel* model, const TrainingTask& task, double* quat) {
+  const ObjectGeometry geometry = objectGeometry(model);
+  if (!geometry.valid())
+    throw TaskError("task '" + task.name + "': initial_object_yaw, but the object is not a capsule or cylinder");
+  const Eigen::Quaterniond q = tubeOrientationFromYaw(*task.initial_object_yaw, geometry);
+  quat[0] = q.w(), quat[1] = q.x(), quat[2] = q.y(), quat[3] = q.z();
+}
+
 }  // namespace
+
+ObjectGeometry objectGeometry(const mjModel* model) {
+  ObjectGeometry g;
+  const int object = mj_name2id(model, mjOBJ_BODY, "object");
+  for (int i = 0; object >= 0 && i < model->ngeom; ++i) {
+    const int type = model->geom_type[i];
+    if (model->geom_bodyid[i] != object || (type != mjGEOM_CAPSULE && type != mjGEOM_CYLINDER)) continue;
+    g.radius = model->geom_size[3 * i];
+    g.half_length = model->geom_size[3 * i + 1];
+    // Capsules and cylinders lie along their geom's z: rotate it into the body frame.
+    const double* q = model->geom_quat + 4 * i;
+    g.axis_in_body = Eigen::Quaterniond(q[0], q[1], q[2], q[3]).normalized() * Eigen::Vector3d::UnitZ();
+    break;
+  }
+  const int table = mj_name2id(model, mjOBJ_GEOM, "table");
+  // geom_pos is in the parent body's frame: the table is a world geom (table top = centre + half height).
+  if (table >= 0 && model->geom_bodyid[table] == 0) g.table_top = model->geom_pos[3 * table + 2] + model->geom_size[3 * table + 2];
+  return g;
+}
 
 std::vector<double> initialQpos(const mjModel* model, const TrainingTask& task, const std::vector<std::string>& joints,
                                 const std::vector<double>& joint_offset) {
@@ -43,13 +71,14 @@ std::vector<double> initialQpos(const mjModel* model, const TrainingTask& task, 
     std::copy(model->key_qpos, model->key_qpos + model->nq, qpos.begin());
   }
   for (const auto& [name, value] : task.initial_joints) qpos[model->jnt_qposadr[jointId(model, name)]] = value;
-  if (!task.initial_object_position.empty()) {
+  if (!task.initial_object_position.empty() || task.initial_object_yaw) {
     // The free joint of body "object" (the driver's object convention).
     const int object = mj_name2id(model, mjOBJ_BODY, "object");
     if (object < 0 || model->body_jntnum[object] != 1 || model->jnt_type[model->body_jntadr[object]] != mjJNT_FREE)
-      throw TaskError("task '" + task.name + "': initial_object_position, but the model has no free body 'object'");
+      throw TaskError("task '" + task.name + "': initial object pose, but the model has no free body 'object'");
     const int adr = model->jnt_qposadr[model->body_jntadr[object]];
     std::copy(task.initial_object_position.begin(), task.initial_object_position.end(), qpos.begin() + adr);
+    if (task.initial_object_yaw) setObjectYaw(model, task, qpos.data() + adr + 3);
   }
   for (std::size_t i = 0; i < joints.size(); ++i) {
     const int j = jointId(model, joints[i]);

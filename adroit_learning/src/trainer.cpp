@@ -59,7 +59,7 @@ Trainer::Trainer(const TrainingTask& task, const TrainerSettings& settings, Roll
   if (static_cast<int>(joint_range_.size()) != layout_.joints())
     throw std::invalid_argument("backend reports " + std::to_string(joint_range_.size()) + " joint ranges for " +
                                 std::to_string(layout_.joints()) + " joints");
-  cost_ = std::make_unique<TrajectoryCost>(task_, layout_, backend_.initialState(task_, layout_));
+  cost_ = std::make_unique<TrajectoryCost>(task_, layout_, backend_.initialState(task_, layout_), backend_.objectGeometry());
   controller_ = LgController::initial(layout_.nx(), task.horizon, Eigen::VectorXd::Constant(layout_.nu(), task.initial_command),
                                       Eigen::VectorXd::Constant(layout_.nu(), task.initial_variance * settings.noise_scale));
   if (!settings_.output_dir.empty()) {

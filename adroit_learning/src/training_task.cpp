@@ -89,7 +89,38 @@ const std::set<std::string> kKnownFields = {
     "initial_pressure", "target_joints", "joint_weight", "final_joint_weight", "action_weight",
     "object_position_weight", "object_rotation_weight", "final_scale", "rotation_axis", "rotation_target",
     "locked_cylinders", "locked_command", "initial_command", "initial_variance", "epsilon",
-    "success_joint_rms", "success_angle", "drop_height"};
+    "success_joint_rms", "success_angle", "drop_height", "initial_object_yaw", "object_position_target",
+    "object_height_weight", "object_height_target", "success_criterion"};
+
+// A world position [x, y, z] within 10 m of the origin.
+std::vector<double> worldPosition(const Reader& r, const std::string& field) {
+  std::vector<double> out;
+  const YAML::Node p = r.node(field);
+  if (!p) return out;
+  if (!p.IsSequence() || p.size() != 3) r.fail(field, "expected [x, y, z] (m)");
+  for (int i = 0; i < 3; ++i) {
+    const double v = r.number(p[i], field);
+    if (std::abs(v) > 10) r.fail(field, "must be within 10 m of the origin");
+    out.push_back(v);
+  }
+  return out;
+}
+
+// The pickup fields (thesis 10.4, 11.3, 11.4).
+void readPickupFields(const Reader& r, TrainingTask& task) {
+  if (const YAML::Node yaw = r.node("initial_object_yaw")) {
+    const double deg = r.number(yaw, "initial_object_yaw");
+    if (deg < 0 || deg >= 180) r.fail("initial_object_yaw", "must be in [0, 180) degrees, got " + Reader::fmt(deg));
+    task.initial_object_yaw = deg;
+  }
+  task.object_position_target = worldPosition(r, "object_position_target");
+  task.object_height_weight = r.number("object_height_weight", 0, 1e6, false, 0);
+  task.object_height_target = r.number("object_height_target", -1, 10, false, 0);
+  task.success_criterion = r.text("success_criterion", false);
+  if (!task.success_criterion.empty() && !task.pickupSuccessCriterion())
+    r.fail("success_criterion", "expected 'pickup' (or none: the joint and angle criteria), got '" +
+                                    task.success_criterion + "'");
+}
 
 }  // namespace
 
@@ -118,14 +149,7 @@ TrainingTask loadTrainingTask(const std::string& path) {
   task.control_dt = r.number("control_dt", 1e-3, 1.0, true, 0);
   task.initial_keyframe = r.text("initial_keyframe", false);
   task.initial_joints = r.jointMap("initial_joints");
-  if (const YAML::Node p = r.node("initial_object_position")) {
-    if (!p.IsSequence() || p.size() != 3) r.fail("initial_object_position", "expected [x, y, z] (m)");
-    for (int i = 0; i < 3; ++i) {
-      const double v = r.number(p[i], "initial_object_position");
-      if (std::abs(v) > 10) r.fail("initial_object_position", "must be within 10 m of the origin");
-      task.initial_object_position.push_back(v);
-    }
-  }
+  task.initial_object_position = worldPosition(r, "initial_object_position");
   task.initial_pressure = r.number("initial_pressure", 101325.0, 700e3, false, task.initial_pressure);
   task.target_joints = r.jointMap("target_joints");
   task.joint_weight = r.number("joint_weight", 0, 1e6, false, task.joint_weight);
@@ -176,6 +200,9 @@ TrainingTask loadTrainingTask(const std::string& path) {
   task.success_joint_rms = r.number("success_joint_rms", 0, 10, false, task.success_joint_rms);
   task.success_angle = r.number("success_angle", 0, 10, false, task.success_angle);
   task.drop_height = r.number("drop_height", -1e9, 10, false, task.drop_height);
+  readPickupFields(r, task);
+  if (task.initial_object_yaw && !task.uses_object())
+    r.fail("initial_object_yaw", "only for tasks with object cost terms");
   if (!task.initial_object_position.empty() && !task.uses_object())
     r.fail("initial_object_position", "only for tasks with object cost terms");
   if (task.target_joints.empty() && !task.uses_object())

@@ -82,35 +82,82 @@ std::string StateLayout::describe() const {
   return s;
 }
 
-TrajectoryCost::TrajectoryCost(const TrainingTask& task, const StateLayout& layout, const Eigen::VectorXd& x_initial)
-    : task_(task), horizon_(task.horizon), nu_(layout.nu()), object_position_(layout.objectPosition()) {
-  const int nx = layout.nx(), nj = layout.joints(), T = horizon_;
-  if (x_initial.size() != nx) throw std::invalid_argument("initial state size differs from the layout");
+TrajectoryCost::TrajectoryCost(const TrainingTask& task, const StateLayout& layout, const Eigen::VectorXd& x_initial,
+                               const ObjectGeometry& geometry)
+    : task_(task), geometry_(geometry), horizon_(task.horizon), nu_(layout.nu()),
+      object_position_(layout.objectPosition()), object_rotation_(layout.objectRotation()),
+      object_velocity_(layout.hasObject() ? layout.qdot() + layout.joints() : -1) {
+  if (x_initial.size() != layout.nx()) throw std::invalid_argument("initial state size differs from the layout");
+  if (task.pickupSuccessCriterion() && !geometry.valid())
+    throw TaskError("task '" + task.name + "': the pickup criterion needs the object's geometry from the scene");
   // ||q - q*||^2 over every joint: unlisted joints are held at their initial angle.
-  target_q_ = x_initial.segment(layout.q(), nj);
+  target_q_ = x_initial.segment(layout.q(), layout.joints());
   for (const auto& [name, value] : task.target_joints) {
     const int j = indexOf(layout.joint_names, name);
     target_q_[j] = value;
     target_joint_index_.push_back(layout.q() + j);
   }
-  StateResidualTerm joints{"joints", Eigen::MatrixXd::Zero(nj, nx), {}, task.joint_weight,
-                           task.final_scale * task.final_joint_weight};
+  addJointTerm(layout);
+  if (layout.hasObject()) addObjectTerms(layout, x_initial);
+}
+
+void TrajectoryCost::addJointTerm(const StateLayout& layout) {
+  const int nx = layout.nx(), nj = layout.joints(), T = horizon_;
+  StateResidualTerm joints{"joints", Eigen::MatrixXd::Zero(nj, nx), {}, task_.joint_weight,
+                           task_.final_scale * task_.final_joint_weight};
   joints.A.block(0, layout.q(), nj, nj).setIdentity();
-  joints.b.assign(T + 1, target_q_);
-  terms_.push_back(std::move(joints));
-  if (layout.hasObject()) {
-    StateResidualTerm position{"object_position", Eigen::MatrixXd::Zero(3, nx), {}, task.object_position_weight,
-                               task.final_scale * task.object_position_weight};
-    position.A.block(0, layout.objectPosition(), 3, 3).setIdentity();
-    position.b.assign(T + 1, x_initial.segment<3>(layout.objectPosition()));
-    terms_.push_back(std::move(position));
-    angle_row_ = Eigen::RowVectorXd::Zero(nx);
-    for (int i = 0; i < 3; ++i) angle_row_[layout.objectRotation() + i] = task.rotation_axis[i];
-    StateResidualTerm rotation{"object_rotation", angle_row_, {}, task.object_rotation_weight,
-                               task.final_scale * task.object_rotation_weight};
-    for (int t = 0; t <= T; ++t) rotation.b.push_back(Eigen::VectorXd::Constant(1, task.rotation_target.at(t, T)));
-    terms_.push_back(std::move(rotation));
+  if (task_.joint_reference.empty()) {
+    joints.b.assign(T + 1, target_q_);
+  } else {  // q_hat_t of a demonstration (thesis 10.4 shaping term)
+    if (static_cast<int>(task_.joint_reference.size()) != T + 1)
+      throw TaskError("task '" + task_.name + "': joint_reference has " + std::to_string(task_.joint_reference.size()) +
+                      " steps, the horizon needs " + std::to_string(T + 1));
+    for (const auto& q : task_.joint_reference) {
+      if (static_cast<int>(q.size()) != nj || !Eigen::Map<const Eigen::VectorXd>(q.data(), nj).allFinite())
+        throw TaskError("task '" + task_.name + "': joint_reference needs " + std::to_string(nj) +
+                        " finite joint angles per step");
+      joints.b.push_back(Eigen::Map<const Eigen::VectorXd>(q.data(), nj));
+    }
   }
+  terms_.push_back(std::move(joints));
+}
+
+void TrajectoryCost::addObjectTerms(const StateLayout& layout, const Eigen::VectorXd& x_initial) {
+  const int nx = layout.nx(), T = horizon_;
+  StateResidualTerm position{"object_position", Eigen::MatrixXd::Zero(3, nx), {}, task_.object_position_weight,
+                             task_.final_scale * task_.object_position_weight};
+  position.A.block(0, layout.objectPosition(), 3, 3).setIdentity();
+  const Eigen::Vector3d p_target = task_.object_position_target.empty()
+                                       ? Eigen::Vector3d(x_initial.segment<3>(layout.objectPosition()))
+                                       : Eigen::Vector3d(task_.object_position_target.data());
+  position.b.assign(T + 1, p_target);
+  terms_.push_back(std::move(position));
+  angle_row_ = Eigen::RowVectorXd::Zero(nx);
+  for (int i = 0; i < 3; ++i) angle_row_[layout.objectRotation() + i] = task_.rotation_axis[i];
+  StateResidualTerm rotation{"object_rotation", angle_row_, {}, task_.object_rotation_weight,
+                             task_.final_scale * task_.object_rotation_weight};
+  for (int t = 0; t <= T; ++t) rotation.b.push_back(Eigen::VectorXd::Constant(1, task_.rotation_target.at(t, T)));
+  terms_.push_back(std::move(rotation));
+  // Thesis 10.4: w_z (z_obj - z*)^2, "the final cost is the same as the running cost".
+  if (task_.object_height_weight == 0) return;
+  StateResidualTerm height{"object_height", Eigen::MatrixXd::Zero(1, nx), {}, task_.object_height_weight,
+                           task_.final_scale * task_.object_height_weight};
+  height.A(0, layout.objectPosition() + 2) = 1.0;
+  height.b.assign(T + 1, Eigen::VectorXd::Constant(1, task_.object_height_target));
+  terms_.push_back(std::move(height));
+}
+
+ObjectState TrajectoryCost::objectState(const Eigen::Ref<const Eigen::VectorXd>& x) const {
+  if (object_position_ < 0) throw std::logic_error("objectState: the layout has no object");
+  ObjectState s;
+  s.position = x.segment<3>(object_position_);
+  const Eigen::Vector3d rv = x.segment<3>(object_rotation_);
+  const double angle = rv.norm();
+  s.orientation = angle < 1e-12 ? Eigen::Quaterniond::Identity()
+                                : Eigen::Quaterniond(Eigen::AngleAxisd(angle, rv / angle));
+  s.linear_velocity = x.segment<3>(object_velocity_);
+  s.angular_velocity = x.segment<3>(object_velocity_ + 3);
+  return s;
 }
 
 double TrajectoryCost::rolloutCost(const Rollout& r) const {
@@ -133,6 +180,15 @@ TaskOutcome TrajectoryCost::outcome(const Rollout& r) const {
   for (int i : target_joint_index_) sq += std::pow(xT[i] - target_q_[i], 2);  // the q block starts at 0
   o.joint_rms = target_joint_index_.empty() ? 0.0 : std::sqrt(sq / target_joint_index_.size());
   bool ok = o.joint_rms <= task_.success_joint_rms || target_joint_index_.empty();
+  if (task_.pickupSuccessCriterion()) {  // thesis 11.4 alone decides
+    const PickupVerdict v = pickupSuccess(objectState(xT), geometry_);
+    o.angle_error = v.axis_angle;
+    o.object_height = xT[object_position_ + 2];
+    o.dropped = o.object_height < task_.drop_height;
+    o.failure = v.failure;
+    o.success = v.success;
+    return o;
+  }
   if (angle_row_.size() > 0) {
     o.angle_error = std::abs(objectAngle(xT) - task_.rotation_target.at(horizon_, horizon_));
     o.object_height = xT[object_position_ + 2];

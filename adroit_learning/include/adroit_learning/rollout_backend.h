@@ -35,6 +35,8 @@ class RolloutBackend {
   virtual bool hasObject() const = 0;
   // Range (rad) of each joint of jointNames(): initial-state noise is a fraction of it.
   virtual std::vector<double> jointRanges() const = 0;
+  // The free object's geometry read from the scene (pickup criterion); invalid without one.
+  virtual ObjectGeometry objectGeometry() const { return {}; }
   // The task's initial state as the robot reports it right after a reset (no offsets): the
   // trainer's targets for joints the task does not name come from it.
   virtual Eigen::VectorXd initialState(const TrainingTask& task, const StateLayout& layout) = 0;

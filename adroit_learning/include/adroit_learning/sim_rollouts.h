@@ -19,11 +19,15 @@ typedef struct mjModel_ mjModel;
 namespace adroit {
 
 // The task's initial qpos on `model`: the keyframe (or the model default), the task's joint
-// overrides and object position (initial_object_position, body "object"), then
+// overrides, object position (initial_object_position, body "object") and orientation
+// (initial_object_yaw, through tubeOrientationFromYaw), then
 // `joint_offset` (per entry of `joints`, may be empty), every robot joint clamped to its
 // range. Throws TaskError for an unknown keyframe or joint.
 std::vector<double> initialQpos(const mjModel* model, const TrainingTask& task, const std::vector<std::string>& joints,
                                 const std::vector<double>& joint_offset);
+// The geometry of body "object" (its first capsule or cylinder geom: half-length, radius, axis)
+// and the top of geom "table" (0 without one). Invalid (half_length 0) when there is none.
+ObjectGeometry objectGeometry(const mjModel* model);
 // Ranges (hi - lo, rad) of the named 1-DOF joints.
 std::vector<double> jointRanges(const mjModel* model, const std::vector<std::string>& joints);
 
@@ -36,6 +40,7 @@ class SimRollouts : public RolloutBackend {
   std::vector<std::string> cylinderNames() const override { return robots_.front()->cylinderNames(); }
   bool hasObject() const override { return robots_.front()->hasObject(); }
   std::vector<double> jointRanges() const override;
+  ObjectGeometry objectGeometry() const override { return adroit::objectGeometry(robots_.front()->model()); }
   Eigen::VectorXd initialState(const TrainingTask& task, const StateLayout& layout) override;
   std::vector<RolloutResult> run(const TrainingTask& task, const StateLayout& layout, const LgController& controller,
                                  const std::vector<RolloutRequest>& requests, const std::atomic<bool>& cancel) override;

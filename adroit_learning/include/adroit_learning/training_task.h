@@ -5,6 +5,7 @@
 #pragma once
 #include <cstdint>
 #include <map>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -36,6 +37,9 @@ struct TrainingTask {
   // Optional object start (world position, m) replacing the keyframe's object position; the
   // object's orientation stays the keyframe's. Empty: the keyframe's object position.
   std::vector<double> initial_object_position;
+  // Optional object orientation (pickup, thesis 11.3): the tube lying with its axis at this
+  // many degrees from world +x towards +y, in [0, 180) (pickup.h: tubeOrientationFromYaw).
+  std::optional<double> initial_object_yaw;
 
   // Cost (thesis 8.4.1, 8.4.2):
   //   l_t = w_q ||q - q*||^2 + w_u ||u||^2 + w_p ||p_obj - p*||^2 + w_r (angle_obj - angle*(t))^2
@@ -46,6 +50,15 @@ struct TrainingTask {
   double object_position_weight = 0, object_rotation_weight = 0, final_scale = 1.0;
   double rotation_axis[3] = {0, 0, 1};  // world axis of the object angle (rotation vector component)
   TargetSchedule rotation_target;       // rad, object angle about the axis
+  // Object goal position p* (world, m); empty: the object's initial position.
+  std::vector<double> object_position_target;
+  // Height term of the pickup cost (thesis 10.4): w_z (z_obj - z*)^2, running and final
+  // (final_scale * w_z).
+  double object_height_weight = 0, object_height_target = 0;
+  // Per-step joint reference q_hat_t (thesis 10.4's shaping term ||q_t - q_hat_t||^2): T + 1
+  // vectors of every joint in the robot's joint order, replacing q* in the joint term. Not read
+  // from YAML: a demonstration fills it; empty = the constant q*.
+  std::vector<std::vector<double>> joint_reference;
 
   // Actions: valve commands of every cylinder except the locked ones, which hold
   // locked_command (volts; 0 = centre, the chamber stays sealed) throughout.
@@ -59,13 +72,19 @@ struct TrainingTask {
   // Success at T: joint RMS error over target_joints below success_joint_rms (rad); object
   // tasks also need the angle within success_angle (rad) and the object above drop_height (m).
   double success_joint_rms = 0.05, success_angle = 0.2, drop_height = -1e9;
+  // "pickup": thesis 11.4's criterion instead (pickup.h: pickupSuccess, its thresholds there).
+  std::string success_criterion;
+  bool pickupSuccessCriterion() const { return success_criterion == "pickup"; }
 
   // Initial chamber pressure of every cylinder (Pa absolute): antagonists at equal pressure
   // hold the pose with some stiffness instead of starting slack.
   double initial_pressure = 250e3;
   // Initial-state noise (delayed robustification, 8.5.1): at noise level s each joint starts
   // uniformly within +-s/2 of its range around the initial pose (clamped to the range).
-  bool uses_object() const { return object_position_weight > 0 || object_rotation_weight > 0; }
+  bool uses_object() const {
+    return object_position_weight > 0 || object_rotation_weight > 0 || object_height_weight > 0 ||
+           pickupSuccessCriterion();
+  }
 };
 
 // Loads and checks one task file. Throws TaskError("<file>: <field>: <problem>").

@@ -4,6 +4,7 @@
 #pragma once
 #include <adroit_learning/dynamics_fit.h>
 #include <adroit_learning/kl_update.h>
+#include <adroit_learning/pickup.h>
 #include <adroit_learning/training_task.h>
 
 #include <Eigen/Dense>
@@ -81,13 +82,16 @@ struct TaskOutcome {
   double object_height = 0;  // object z at T
   bool dropped = false;
   bool success = false;
+  std::string failure;       // pickup criterion: the condition that failed ("" otherwise)
 };
 
 class TrajectoryCost {
  public:
   // x_initial: the task's initial state, which gives the targets of unlisted joints and the
-  // object's target position.
-  TrajectoryCost(const TrainingTask& task, const StateLayout& layout, const Eigen::VectorXd& x_initial);
+  // object's target position. geometry: the object's (RolloutBackend::objectGeometry), needed
+  // by the pickup success criterion (a TaskError without it).
+  TrajectoryCost(const TrainingTask& task, const StateLayout& layout, const Eigen::VectorXd& x_initial,
+                 const ObjectGeometry& geometry = {});
   int horizon() const { return horizon_; }
   const std::vector<StateResidualTerm>& terms() const { return terms_; }
   // sum_t l_t(x_t, u_t) + l_T(x_T) of one rollout.
@@ -101,10 +105,15 @@ class TrajectoryCost {
   // term is quadratic in (x, u), so the expansion is exact and the same at every sample; the
   // samples only fix where a non-quadratic term would be expanded.
   void expand(const std::vector<Rollout>& samples, QuadraticCost& out) const;
+  // The object's pose and velocity in state x (a layout with the object).
+  ObjectState objectState(const Eigen::Ref<const Eigen::VectorXd>& x) const;
 
  private:
+  void addJointTerm(const StateLayout& layout);
+  void addObjectTerms(const StateLayout& layout, const Eigen::VectorXd& x_initial);
   TrainingTask task_;
-  int horizon_, nu_, object_position_ = -1;
+  ObjectGeometry geometry_;
+  int horizon_, nu_, object_position_ = -1, object_rotation_ = -1, object_velocity_ = -1;
   std::vector<StateResidualTerm> terms_;
   std::vector<int> target_joint_index_;  // entries of x whose error success_joint_rms measures
   Eigen::VectorXd target_q_;

@@ -31,6 +31,10 @@ PACKAGES=(
   libmujoco-dev libmujoco-samples libqhull-dev
   # numerics, config, testing, benchmarks
   libeigen3-dev libyaml-cpp-dev libgtest-dev libgmock-dev libbenchmark-dev python3-numpy
+  # neural-network policies (adroit_learning_network, thesis 11.6): libtorch on the CPU, and
+  # OpenBLAS for its libblas.so.3 (without recommends the reference BLAS may be all there is,
+  # several times slower for the training's matrix products)
+  libtorch-dev libopenblas0-pthread
   # the workspace's own tests: its result counting; readelf for the check that no core
   # library links a ROS library (scripts/test_core_links.py)
   python3-pytest binutils

@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cmath>
 #include <thread>
+#include <utility>
 
 namespace adroit::learning_node {
 
@@ -449,25 +450,35 @@ Eigen::VectorXd DriverRollouts::initialState(const TrainingTask& task, const Sta
   return x;
 }
 
+template <class Act>
 RolloutResult DriverRollouts::runOne(DriverConnection& d, const TrainingTask& task, const StateLayout& layout,
-                                     const LgController& controller, const RolloutRequest& request,
+                                     const RolloutRequest& request, int steps, Act&& act,
                                      const std::atomic<bool>& cancel) {
   RolloutResult failed;
-  if (!d.reset(initialQpos(model_.get(), task, joints_, request.joint_offset),
+  failed.error = objectYawProblem(request);
+  if (!failed.error.empty()) return failed;
+  const std::uint64_t resets_by_control = d.resetsByControl();
+  if (!d.reset(initialQpos(model_.get(), task, joints_, request.joint_offset, request.object_yaw_deg),
                std::vector<double>(cylinders_.size(), task.initial_pressure), task.locked_command, failed.error))
     return failed;
+  // A real robot is reset by control: nothing places its object, so a requested yaw cannot hold.
+  if (request.object_yaw_deg && d.resetsByControl() != resets_by_control) {  // the valves stay held
+    failed.error = "driver " + d.ns() + " cannot set the object's yaw (a real robot is reset by control): place the "
+                   "object by hand and run without object_yaw_deg";
+    return failed;
+  }
   const int substeps = static_cast<int>(std::lround(task.control_dt / model_->opt.timestep));
   int t = 0;
   const int late_before = d.lateTicks(), stalls_before = d.stalls();
   RolloutResult result = runControlLoop(
-      layout, controller, request.noise, cancel,
+      layout, steps, cancel, std::forward<Act>(act),
       [&](Observation& obs, std::string& error) { return d.observe(t++, obs, error); },
       [&](const std::vector<double>& volts, std::string& error) { return d.send(volts, error); },
       [&](std::string& error) { return d.advance(substeps, task.control_dt, error); });
   d.hold();
   if (d.lateTicks() > late_before)  // realtime: the policy was not evaluated at the control rate throughout
     ROS_WARN("adroit_learning: driver %s: %d of %d control steps of the rollout came more than half a step late",
-             d.ns().c_str(), d.lateTicks() - late_before, task.horizon);
+             d.ns().c_str(), d.lateTicks() - late_before, steps);
   if (d.stalls() > stalls_before)
     ROS_WARN("adroit_learning: driver %s: the rollout sent no command for two control steps %d time(s); the "
              "valves were held meanwhile",
@@ -475,20 +486,39 @@ RolloutResult DriverRollouts::runOne(DriverConnection& d, const TrainingTask& ta
   return result;
 }
 
+template <class Rollout>
+std::vector<RolloutResult> DriverRollouts::runOnDrivers(const std::vector<RolloutRequest>& requests,
+                                                        Rollout&& rollout) {
+  std::vector<RolloutResult> results(requests.size());
+  std::vector<std::thread> threads;
+  for (std::size_t k = 0; k < drivers_.size(); ++k)
+    threads.emplace_back([&, k] {
+      for (std::size_t i = k; i < requests.size(); i += drivers_.size()) results[i] = rollout(*drivers_[k], requests[i]);
+    });
+  for (auto& t : threads) t.join();
+  return results;
+}
+
 std::vector<RolloutResult> DriverRollouts::run(const TrainingTask& task, const StateLayout& layout,
                                                const LgController& controller,
                                                const std::vector<RolloutRequest>& requests,
                                                const std::atomic<bool>& cancel) {
-  std::vector<RolloutResult> results(requests.size());
-  // Driver k runs requests k, k + K, ...; one thread per driver.
-  std::vector<std::thread> threads;
-  for (std::size_t k = 0; k < drivers_.size(); ++k)
-    threads.emplace_back([&, k] {
-      for (std::size_t i = k; i < requests.size(); i += drivers_.size())
-        results[i] = runOne(*drivers_[k], task, layout, controller, requests[i], cancel);
-    });
-  for (auto& t : threads) t.join();
-  return results;
+  return runOnDrivers(requests, [&](DriverConnection& d, const RolloutRequest& request) {
+    return runOne(d, task, layout, request, controller.horizon(), controllerAction(controller, request.noise), cancel);
+  });
+}
+
+std::vector<RolloutResult> DriverRollouts::runPolicy(const TrainingTask& task, const StateLayout& layout,
+                                                     const PolicyFactory& make_policy,
+                                                     const std::vector<RolloutRequest>& requests, int steps,
+                                                     const std::atomic<bool>& cancel) {
+  return runOnDrivers(requests, [&](DriverConnection& d, const RolloutRequest& request) {
+    RolloutResult failed;
+    int rollout_steps = steps;
+    std::unique_ptr<Policy> policy = policyForRollout(make_policy, *this, layout, task, rollout_steps, failed.error);
+    if (!policy) return failed;
+    return runOne(d, task, layout, request, rollout_steps, policyAction(*policy), cancel);
+  });
 }
 
 }  // namespace adroit::learning_node

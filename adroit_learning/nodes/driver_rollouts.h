@@ -76,6 +76,8 @@ class DriverConnection {
   // Realtime: rollout commands the keep-alive replaced by the hold command because the rollout
   // sent none for two control steps.
   int stalls() const { return stalls_.load(); }
+  // Realtime: resets done by control (a real robot, which cannot be set to a state).
+  std::uint64_t resetsByControl() const { return resets_by_control_; }
 
  private:
   void onJoints(const sensor_msgs::JointState::ConstPtr& msg);
@@ -138,10 +140,18 @@ class DriverRollouts : public RolloutBackend {
   Eigen::VectorXd initialState(const TrainingTask& task, const StateLayout& layout) override;
   std::vector<RolloutResult> run(const TrainingTask& task, const StateLayout& layout, const LgController& controller,
                                  const std::vector<RolloutRequest>& requests, const std::atomic<bool>& cancel) override;
+  std::vector<RolloutResult> runPolicy(const TrainingTask& task, const StateLayout& layout,
+                                       const PolicyFactory& make_policy, const std::vector<RolloutRequest>& requests,
+                                       int steps, const std::atomic<bool>& cancel) override;
 
  private:
+  // Driver k runs requests k, k + K, ... on its own thread: rollout(driver, request) -> result.
+  template <class Rollout>
+  std::vector<RolloutResult> runOnDrivers(const std::vector<RolloutRequest>& requests, Rollout&& rollout);
+  // One rollout on `driver` with `act` (runControlLoop), after its reset.
+  template <class Act>
   RolloutResult runOne(DriverConnection& driver, const TrainingTask& task, const StateLayout& layout,
-                       const LgController& controller, const RolloutRequest& request, const std::atomic<bool>& cancel);
+                       const RolloutRequest& request, int steps, Act&& act, const std::atomic<bool>& cancel);
   ModelPtr model_;
   std::vector<std::unique_ptr<DriverConnection>> drivers_;
   std::vector<std::string> joints_, cylinders_;

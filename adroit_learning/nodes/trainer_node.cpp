@@ -16,6 +16,8 @@
 // The job runs on its own thread; callbacks only read or set its shared state, so status and
 // cancel answer while rollouts run.
 #include <adroit_description/scenes.h>
+#include <adroit_learning/network_policy.h>
+#include <adroit_learning/policy_loader.h>
 #include <adroit_learning/sim_rollouts.h>
 #include <adroit_learning/trainer.h>
 #include <adroit_learning/trainer_requests.h>
@@ -40,11 +42,14 @@
 #include <cstring>
 #include <cmath>
 #include <ctime>
+#include <filesystem>
 #include <limits>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <thread>
 
+#include "demonstration_bag.h"
 #include "driver_rollouts.h"
 
 namespace adroit::learning_node {
@@ -164,16 +169,17 @@ class TrainerNode {
     }
     res.message = countsProblem(req);
     if (!res.message.empty()) return true;
-    if (!req.demonstrations.empty()) {
-      res.message = "learning from demonstrations is not available yet; leave 'demonstrations' empty";
-      return true;
-    }
     TrainingTask task;
     try {
       task = findTrainingTask(tasks_dir_, req.task);
     } catch (const std::exception& e) {
       res.message = e.what();
       return true;
+    }
+    std::optional<Demonstration> demonstration;
+    if (!req.demonstrations.empty()) {
+      res.message = readDemonstration(req.demonstrations, task, demonstration);
+      if (!res.message.empty()) return true;
     }
     TrainerSettings settings;
     settings.iterations = static_cast<int>(req.iterations);
@@ -206,19 +212,48 @@ class TrainerNode {
     iterations_ = settings.iterations;
     mean_cost_ = best_cost_ = std::numeric_limits<double>::quiet_NaN();
     success_rate_ = 0;
-    job_ = std::thread(&TrainerNode::runJob, this, task, settings, id);
+    job_ = std::thread(&TrainerNode::runJob, this, task, settings, id, demonstration);
     res.accepted = true;
     res.job_id = id;
     res.message = "training " + task.name + " for " + std::to_string(settings.iterations) + " iterations x " +
                   std::to_string(settings.samples) + " rollouts on backend " + backend_ + ", output in " +
-                  settings.output_dir;
+                  settings.output_dir + (demonstration ? ", imitating " + req.demonstrations : "");
     return true;
   }
 
-  void runJob(TrainingTask task, TrainerSettings settings, std::string id) {
+  // The bag as a Demonstration fit for `task` (what `demos export` and the task-level checks
+  // say); "" when it is, else the one line that refuses the request. Nothing is trained then.
+  static std::string readDemonstration(const std::string& bag, const TrainingTask& task,
+                                       std::optional<Demonstration>& demonstration) {
+    char work[] = "/tmp/adroit_demonstration_XXXXXX";
+    if (!::mkdtemp(work)) return "cannot make a temporary directory for the demonstration: " + std::string(std::strerror(errno));
+    std::string problem;
+    try {
+      demonstration = exportDemonstration(bag, task.control_dt, work);
+      problem = demonstrationTaskMismatch(*demonstration, task);
+    } catch (const DemonstrationError& e) {
+      problem = e.what();
+    }
+    std::filesystem::remove_all(work);
+    return problem;
+  }
+
+  // Imitation (thesis 10.4) once the robot's layout is known: q_hat_t, the condition (the tube's
+  // initial yaw) and the first iteration's controls come from the demonstration.
+  static void imitate(const Demonstration& demo, const RolloutBackend& backend, TrainingTask& task,
+                      TrainerSettings& settings) {
+    const StateLayout layout(task, backend.jointNames(), backend.cylinderNames(), backend.hasObject());
+    const std::string problem = demonstrationRobotMismatch(demo, layout);
+    if (!problem.empty()) throw DemonstrationError(problem);
+    imitateDemonstration(demo, layout, backend.objectGeometry(), task);
+    settings.initial_actions = demonstrationActions(demo, layout, task.horizon);
+  }
+
+  void runJob(TrainingTask task, TrainerSettings settings, std::string id, std::optional<Demonstration> demonstration) {
     std::string state = "failed", message;
     try {
       std::unique_ptr<RolloutBackend> backend = makeBackend(task, backend_);
+      if (demonstration) imitate(*demonstration, *backend, task, settings);
       auto trainer = std::make_shared<Trainer>(task, settings, *backend);
       {
         std::lock_guard<std::mutex> lock(mutex_);
@@ -347,44 +382,58 @@ class TrainerNode {
   // What execute_policy runs: everything a request can get wrong is found here, before the
   // robot is claimed or a driver is touched.
   struct Execution {
-    PolicyFile policy;
-    TrainingTask task;
-    LgController controller;  // the policy's, cut to the requested duration
+    std::unique_ptr<Policy> policy;  // any kind (loadPolicy): TVLG file, library, network
+    PolicyOrigin origin;
+    TrainingTask task;               // horizon: the steps to run (the requested duration)
   };
 
+  // The object of a scene, read from its model file (a library reads the tube's yaw with it).
+  static ObjectGeometry sceneObjectGeometry(const std::string& scene) {
+    const std::string share = ros::package::getPath("adroit_description");
+    return objectGeometry(loadModelFile(description::sceneFile(share, scene, false)).model.get());
+  }
+
+  // The kind a request's policy_type names ("" = any); ExecutePolicy.srv's names are aliases.
+  static std::string requestedKind(const std::string& policy_type) {
+    if (policy_type.empty() || policy_type == "tvlg") return policy_type;
+    if (policy_type == "library" || policy_type == "nearest") return "library";
+    if (policy_type == "network" || policy_type == "neural") return "network";
+    throw std::runtime_error("policy_type '" + policy_type +
+                             "' is not available; known: tvlg, library (nearest), network (neural)");
+  }
+
   Execution prepareExecution(const adroit_msgs::ExecutePolicy::Request& req) const {
-    if (!req.policy_type.empty() && req.policy_type != "tvlg")
-      throw std::runtime_error("policy_type '" + req.policy_type + "' is not available; this trainer writes tvlg");
+    const std::string kind = requestedKind(req.policy_type);
     const std::string bad_duration = executeDurationProblem(req.duration);
     if (!bad_duration.empty()) throw std::runtime_error(bad_duration);
     Execution e;
-    e.policy = readPolicyFile(req.policy_path);  // regular files only, bounded
-    e.task = findTrainingTask(tasks_dir_, e.policy.task);
-    if (std::abs(e.task.control_dt - e.policy.control_dt) > 1e-12)
-      throw std::runtime_error(req.policy_path + ": control_dt " + std::to_string(e.policy.control_dt) + " s, task '" +
+    e.policy = loadPolicy(req.policy_path, PolicyContext{sceneObjectGeometry}, &e.origin);  // regular files only, bounded
+    if (!kind.empty() && e.policy->kind() != kind)
+      throw std::runtime_error(req.policy_path + ": a " + e.policy->kind() + " policy, the request asks for " +
+                               req.policy_type);
+    e.task = findTrainingTask(tasks_dir_, e.origin.task);
+    if (std::abs(e.task.control_dt - e.origin.control_dt) > 1e-12)
+      throw std::runtime_error(req.policy_path + ": control_dt " + std::to_string(e.origin.control_dt) + " s, task '" +
                                e.task.name + "' now has " + std::to_string(e.task.control_dt) + " s");
-    const LgController& full = e.policy.controller;
-    e.task.horizon = executeHorizon(full.horizon(), e.task.control_dt, req.duration);
-    e.controller = LgController(full.nx(), full.nu(), e.task.horizon);
-    for (int t = 0; t < e.task.horizon; ++t) {
-      e.controller.K[t] = full.K[t];
-      e.controller.k[t] = full.k[t];
-      e.controller.setCovariance(t, full.covariance(t));
-    }
+    // A time-invariant policy runs for the task's horizon unless a duration says otherwise.
+    const int full = e.policy->horizon() > 0 ? e.policy->horizon() : e.task.horizon;
+    e.task.horizon = executeHorizon(full, e.task.control_dt, req.duration);
     return e;
   }
 
   // One rollout of the policy's mean on the driver; the message of a success.
-  std::string execute(const std::string& path, Execution& e, double& final_cost) {
+  std::string execute(Execution& e, double& final_cost) {
     TrainingTask& task = e.task;
     std::unique_ptr<RolloutBackend> backend = makeBackend(task, "driver");  // always on the robot
     const StateLayout layout(task, backend->jointNames(), backend->cylinderNames(), backend->hasObject());
     const std::string mismatch =
-        policyMismatch(e.policy, path, layout.joint_names, layout.cylinder_names, layout.describe());
+        e.policy->mismatch(layout.joint_names, layout.cylinder_names, backend->touchNames(), layout);
     if (!mismatch.empty()) throw std::runtime_error(mismatch);
     const TrajectoryCost cost(task, layout, backend->initialState(task, layout), backend->objectGeometry());
-    const RolloutRequest mean{Eigen::MatrixXd::Zero(layout.nu(), task.horizon), {}};
-    const std::vector<RolloutResult> results = backend->run(task, layout, e.controller, {mean}, execute_cancel_);
+    // One rollout: the factory hands over the policy loaded (and checked) above.
+    const PolicyFactory once = [&e] { return std::move(e.policy); };
+    const std::vector<RolloutResult> results =
+        backend->runPolicy(task, layout, once, {RolloutRequest{}}, task.horizon, execute_cancel_);
     if (!results.front().ok) throw std::runtime_error("rollout failed: " + results.front().error);
     const TaskOutcome outcome = cost.outcome(results.front().sample);
     final_cost = outcome.cost;
@@ -423,7 +472,7 @@ class TrainerNode {
       execute_cancel_ = false;
     }
     try {
-      res.message = execute(req.policy_path, e, res.final_cost);
+      res.message = execute(e, res.final_cost);
       res.success = true;
       ROS_INFO("adroit_learning: execute_policy %s: %s", req.policy_path.c_str(), res.message.c_str());
     } catch (const std::exception& error) {
@@ -460,5 +509,6 @@ class TrainerNode {
 }  // namespace adroit::learning_node
 
 int main(int argc, char** argv) {
+  adroit::registerNetworkPolicyReader();  // execute_policy runs network policy files too
   return adroit::rosutil::runNode<adroit::learning_node::TrainerNode>(argc, argv, "adroit_learning", 4);
 }

@@ -44,4 +44,15 @@ Eigen::Quaterniond tubeOrientationFromYaw(double yaw_degrees, const ObjectGeomet
   return (yaw * onto_x).normalized();
 }
 
+double tubeYawDegrees(const Eigen::Quaterniond& q, const ObjectGeometry& geometry) {
+  const Eigen::Vector3d axis = objectAxis(q, geometry);
+  const double horizontal = std::hypot(axis.x(), axis.y());
+  if (!(horizontal > 1e-9)) throw std::invalid_argument("the tube's axis is vertical or not finite: it has no yaw");
+  // Either end of the symmetric tube gives the same yaw modulo 180.
+  double yaw = std::atan2(axis.y(), axis.x()) * 180.0 / M_PI;
+  if (yaw < 0) yaw += 180.0;
+  if (yaw >= 180.0) yaw -= 180.0;  // also -1e-17 + 180, which rounds to 180
+  return yaw;
+}
+
 }  // namespace adroit

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <thread>
+#include <utility>
 
 namespace adroit {
 
@@ -30,12 +31,12 @@ int jointId(const mjModel* model, const std::string& name) {
   return j;
 }
 
-// The free object's quaternion (w x y z) from the task's yaw.
-void setObjectYaw(const mjModel* model, const TrainingTask& task, double* quat) {
+// The free object's quaternion (w x y z) from a yaw (degrees).
+void setObjectYaw(const mjModel* model, const TrainingTask& task, double yaw_deg, double* quat) {
   const ObjectGeometry geometry = objectGeometry(model);
   if (!geometry.valid())
-    throw TaskError("task '" + task.name + "': initial_object_yaw, but the object is not a capsule or cylinder");
-  const Eigen::Quaterniond q = tubeOrientationFromYaw(*task.initial_object_yaw, geometry);
+    throw TaskError("task '" + task.name + "': initial object yaw, but the object is not a capsule or cylinder");
+  const Eigen::Quaterniond q = tubeOrientationFromYaw(yaw_deg, geometry);
   quat[0] = q.w(), quat[1] = q.x(), quat[2] = q.y(), quat[3] = q.z();
 }
 
@@ -61,7 +62,8 @@ ObjectGeometry objectGeometry(const mjModel* model) {
 }
 
 std::vector<double> initialQpos(const mjModel* model, const TrainingTask& task, const std::vector<std::string>& joints,
-                                const std::vector<double>& joint_offset) {
+                                const std::vector<double>& joint_offset, std::optional<double> object_yaw_deg) {
+  if (!object_yaw_deg) object_yaw_deg = task.initial_object_yaw;
   std::vector<double> qpos(model->qpos0, model->qpos0 + model->nq);
   if (!task.initial_keyframe.empty()) {
     const int key = mj_name2id(model, mjOBJ_KEY, task.initial_keyframe.c_str());
@@ -71,14 +73,14 @@ std::vector<double> initialQpos(const mjModel* model, const TrainingTask& task, 
     std::copy(model->key_qpos, model->key_qpos + model->nq, qpos.begin());
   }
   for (const auto& [name, value] : task.initial_joints) qpos[model->jnt_qposadr[jointId(model, name)]] = value;
-  if (!task.initial_object_position.empty() || task.initial_object_yaw) {
+  if (!task.initial_object_position.empty() || object_yaw_deg) {
     // The free joint of body "object" (the driver's object convention).
     const int object = mj_name2id(model, mjOBJ_BODY, "object");
     if (object < 0 || model->body_jntnum[object] != 1 || model->jnt_type[model->body_jntadr[object]] != mjJNT_FREE)
       throw TaskError("task '" + task.name + "': initial object pose, but the model has no free body 'object'");
     const int adr = model->jnt_qposadr[model->body_jntadr[object]];
     std::copy(task.initial_object_position.begin(), task.initial_object_position.end(), qpos.begin() + adr);
-    if (task.initial_object_yaw) setObjectYaw(model, task, qpos.data() + adr + 3);
+    if (object_yaw_deg) setObjectYaw(model, task, *object_yaw_deg, qpos.data() + adr + 3);
   }
   for (std::size_t i = 0; i < joints.size(); ++i) {
     const int j = jointId(model, joints[i]);
@@ -103,6 +105,7 @@ void observe(const driver::SimulatedRobot& robot, Observation& obs) {
   obs.joint_position = s.joint_position;
   obs.joint_velocity = s.joint_velocity;
   obs.pressure = s.pressure;
+  obs.touch = s.touch;
   obs.object = s.object;
 }
 
@@ -131,28 +134,37 @@ Eigen::VectorXd SimRollouts::initialState(const TrainingTask& task, const StateL
   return x;
 }
 
-RolloutResult SimRollouts::runOne(int worker, const TrainingTask& task, const StateLayout& layout,
-                                  const LgController& controller, const RolloutRequest& request,
-                                  const std::atomic<bool>& cancel) {
+bool SimRollouts::resetForRollout(int worker, const TrainingTask& task, const StateLayout& layout,
+                                  const RolloutRequest& request, std::string& error) {
   driver::SimulatedRobot& robot = *robots_[worker];
-  RolloutResult failed;
-  if (robot.safety().safe_state && !robot.release(&failed.error)) {
-    failed.error = "robot stays in its safe state: " + failed.error;
-    return failed;
+  if (robot.safety().safe_state && !robot.release(&error)) {
+    error = "robot stays in its safe state: " + error;
+    return false;
   }
+  error = objectYawProblem(request);
+  if (!error.empty()) return false;
   robot.setState(start_);
-  const std::vector<double> qpos = initialQpos(robot.model(), task, layout.joint_names, request.joint_offset);
-  if (!robot.resetToState(qpos, {}, std::vector<double>(layout.cylinder_names.size(), task.initial_pressure),
-                          &failed.error)) {
-    failed.error = "reset refused: " + failed.error;
-    return failed;
+  const std::vector<double> qpos =
+      initialQpos(robot.model(), task, layout.joint_names, request.joint_offset, request.object_yaw_deg);
+  if (!robot.resetToState(qpos, {}, std::vector<double>(layout.cylinder_names.size(), task.initial_pressure), &error)) {
+    error = "reset refused: " + error;
+    return false;
   }
-  if (!settle(robot, task.locked_command, failed.error)) return failed;
+  return settle(robot, task.locked_command, error);
+}
+
+template <class Act>
+RolloutResult SimRollouts::runOne(int worker, const TrainingTask& task, const StateLayout& layout,
+                                  const RolloutRequest& request, int steps, Act&& act,
+                                  const std::atomic<bool>& cancel) {
+  RolloutResult failed;
+  if (!resetForRollout(worker, task, layout, request, failed.error)) return failed;
+  driver::SimulatedRobot& robot = *robots_[worker];
   const int substeps = static_cast<int>(std::lround(task.control_dt / robot.timestep()));
   const std::vector<std::uint16_t> no_indices;
   const std::vector<std::string>& names = robot.cylinderNames();
   return runControlLoop(
-      layout, controller, request.noise, cancel,
+      layout, steps, cancel, std::forward<Act>(act),
       [&](Observation& obs, std::string& error) {
         if (robot.safety().safe_state) {
           error = "the robot entered its safe state: " + robot.describe(robot.safetyEvents().last);
@@ -172,15 +184,35 @@ RolloutResult SimRollouts::runOne(int worker, const TrainingTask& task, const St
       });
 }
 
-std::vector<RolloutResult> SimRollouts::run(const TrainingTask& task, const StateLayout& layout,
-                                            const LgController& controller, const std::vector<RolloutRequest>& requests,
-                                            const std::atomic<bool>& cancel) {
+void SimRollouts::checkControlStep(const TrainingTask& task) const {
   const double ratio = task.control_dt / robots_.front()->timestep();
   if (std::abs(ratio - std::lround(ratio)) > 1e-9 || ratio < 1)
     throw TaskError("task '" + task.name + "': control_dt must be a multiple of the physics step");
+}
+
+std::vector<RolloutResult> SimRollouts::run(const TrainingTask& task, const StateLayout& layout,
+                                            const LgController& controller, const std::vector<RolloutRequest>& requests,
+                                            const std::atomic<bool>& cancel) {
+  checkControlStep(task);
   std::vector<RolloutResult> results(requests.size());
   pool_.parallelForWorkers(requests.size(), [&](std::size_t i, std::size_t worker) {
-    results[i] = runOne(static_cast<int>(worker), task, layout, controller, requests[i], cancel);
+    results[i] = runOne(static_cast<int>(worker), task, layout, requests[i], controller.horizon(),
+                        controllerAction(controller, requests[i].noise), cancel);
+  });
+  return results;
+}
+
+std::vector<RolloutResult> SimRollouts::runPolicy(const TrainingTask& task, const StateLayout& layout,
+                                                  const PolicyFactory& make_policy,
+                                                  const std::vector<RolloutRequest>& requests, int steps,
+                                                  const std::atomic<bool>& cancel) {
+  checkControlStep(task);
+  std::vector<RolloutResult> results(requests.size());
+  pool_.parallelForWorkers(requests.size(), [&](std::size_t i, std::size_t worker) {
+    int rollout_steps = steps;
+    std::unique_ptr<Policy> policy = policyForRollout(make_policy, *this, layout, task, rollout_steps, results[i].error);
+    if (policy)
+      results[i] = runOne(static_cast<int>(worker), task, layout, requests[i], rollout_steps, policyAction(*policy), cancel);
   });
   return results;
 }

@@ -62,10 +62,20 @@ Trainer::Trainer(const TrainingTask& task, const TrainerSettings& settings, Roll
   cost_ = std::make_unique<TrajectoryCost>(task_, layout_, backend_.initialState(task_, layout_), backend_.objectGeometry());
   controller_ = LgController::initial(layout_.nx(), task.horizon, Eigen::VectorXd::Constant(layout_.nu(), task.initial_command),
                                       Eigen::VectorXd::Constant(layout_.nu(), task.initial_variance * settings.noise_scale));
+  startFromActions(settings.initial_actions);
   if (!settings_.output_dir.empty()) {
     ::mkdir(settings_.output_dir.c_str(), 0755);  // an existing directory is fine; writability is tested next
     writeFileAtomically(settings_.output_dir + "/learning_curve.csv", learningCurveCsv({}));
   }
+}
+
+void Trainer::startFromActions(const Eigen::MatrixXd& actions) {
+  if (actions.size() == 0) return;
+  if (actions.rows() != layout_.nu() || actions.cols() != task_.horizon)
+    throw std::invalid_argument("initial actions are " + std::to_string(actions.rows()) + "x" + std::to_string(actions.cols()) +
+                                ", the task needs " + std::to_string(layout_.nu()) + "x" + std::to_string(task_.horizon));
+  if (!actions.allFinite()) throw std::invalid_argument("initial actions are not all finite");
+  for (int t = 0; t < task_.horizon; ++t) controller_.k[t] = actions.col(t);
 }
 
 std::vector<RolloutRequest> Trainer::makeRequests(int count, double state_noise) {

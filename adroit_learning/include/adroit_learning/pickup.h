@@ -67,4 +67,9 @@ Eigen::Vector3d objectAxis(const Eigen::Quaterniond& q, const ObjectGeometry& ge
 // orientations). Throws std::invalid_argument outside that range or non-finite.
 Eigen::Quaterniond tubeOrientationFromYaw(double yaw_degrees, const ObjectGeometry& geometry);
 
+// The inverse on any orientation: the yaw (degrees in [0, 180)) of the horizontal projection of
+// the tube's axis, as the nearest-neighbour library observes it (11.5). Throws
+// std::invalid_argument when the axis is vertical (no yaw) or not finite.
+double tubeYawDegrees(const Eigen::Quaterniond& q, const ObjectGeometry& geometry);
+
 }  // namespace adroit

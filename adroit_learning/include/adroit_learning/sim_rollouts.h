@@ -11,6 +11,7 @@
 #include <adroit_learning/rollout_backend.h>
 
 #include <memory>
+#include <optional>
 #include <vector>
 
 struct mjModel_;
@@ -20,11 +21,13 @@ namespace adroit {
 
 // The task's initial qpos on `model`: the keyframe (or the model default), the task's joint
 // overrides, object position (initial_object_position, body "object") and orientation
-// (initial_object_yaw, through tubeOrientationFromYaw), then
+// (`object_yaw_deg` when given, else initial_object_yaw, through tubeOrientationFromYaw), then
 // `joint_offset` (per entry of `joints`, may be empty), every robot joint clamped to its
-// range. Throws TaskError for an unknown keyframe or joint.
+// range. Throws TaskError for an unknown keyframe or joint, std::invalid_argument for a yaw
+// outside [0, 180).
 std::vector<double> initialQpos(const mjModel* model, const TrainingTask& task, const std::vector<std::string>& joints,
-                                const std::vector<double>& joint_offset);
+                                const std::vector<double>& joint_offset,
+                                std::optional<double> object_yaw_deg = std::nullopt);
 // The geometry of body "object" (its first capsule or cylinder geom: half-length, radius, axis)
 // and the top of geom "table" (0 without one). Invalid (half_length 0) when there is none.
 ObjectGeometry objectGeometry(const mjModel* model);
@@ -39,16 +42,27 @@ class SimRollouts : public RolloutBackend {
   std::vector<std::string> jointNames() const override { return robots_.front()->jointNames(); }
   std::vector<std::string> cylinderNames() const override { return robots_.front()->cylinderNames(); }
   bool hasObject() const override { return robots_.front()->hasObject(); }
+  std::vector<std::string> touchNames() const override { return robots_.front()->touchNames(); }
   std::vector<double> jointRanges() const override;
   ObjectGeometry objectGeometry() const override { return adroit::objectGeometry(robots_.front()->model()); }
   Eigen::VectorXd initialState(const TrainingTask& task, const StateLayout& layout) override;
   std::vector<RolloutResult> run(const TrainingTask& task, const StateLayout& layout, const LgController& controller,
                                  const std::vector<RolloutRequest>& requests, const std::atomic<bool>& cancel) override;
+  // One policy per rollout (make_policy is called on the worker threads); deterministic as run().
+  std::vector<RolloutResult> runPolicy(const TrainingTask& task, const StateLayout& layout,
+                                       const PolicyFactory& make_policy, const std::vector<RolloutRequest>& requests,
+                                       int steps, const std::atomic<bool>& cancel) override;
   int workers() const { return static_cast<int>(robots_.size()); }
 
  private:
-  RolloutResult runOne(int worker, const TrainingTask& task, const StateLayout& layout, const LgController& controller,
-                       const RolloutRequest& request, const std::atomic<bool>& cancel);
+  void checkControlStep(const TrainingTask& task) const;
+  // Resets the worker's robot to the request's initial state; false with `error` set.
+  bool resetForRollout(int worker, const TrainingTask& task, const StateLayout& layout, const RolloutRequest& request,
+                       std::string& error);
+  // The control loop on the worker's robot with `act` (runControlLoop), after its reset.
+  template <class Act>
+  RolloutResult runOne(int worker, const TrainingTask& task, const StateLayout& layout, const RolloutRequest& request,
+                       int steps, Act&& act, const std::atomic<bool>& cancel);
   std::vector<std::unique_ptr<driver::SimulatedRobot>> robots_;
   driver::SimState start_;  // captured once after construction (same for every worker)
   ThreadPool pool_;

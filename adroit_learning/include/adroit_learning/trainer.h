@@ -36,6 +36,10 @@ struct TrainerSettings {
   DynamicsFitSettings dynamics;
   KlUpdateSettings kl;
   std::string output_dir;           // "" = write nothing
+  // Learning from imitation (thesis 10.4): the first iteration samples around these controls
+  // (nu x T, a demonstration's: demonstrationActions) with the task's exploration noise,
+  // instead of around the task's initial_command. Empty: learning from experience only.
+  Eigen::MatrixXd initial_actions;
 };
 
 // Checks the settings; "" when valid, else one line naming the bad field.
@@ -82,6 +86,7 @@ class Trainer {
 
  private:
   void writeLearningCurve() const;
+  void startFromActions(const Eigen::MatrixXd& actions);  // settings.initial_actions as the first mean
 
   TrainingTask task_;
   TrainerSettings settings_;

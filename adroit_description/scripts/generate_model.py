@@ -339,7 +339,10 @@ HAND_BASE_TARGET = "hand_base_target"
 # Forearm orientations in the world (euler xyz): the forearm's +z points along world +y.
 PALM_DOWN = (-1.5708, 0, 3.14159)
 PALM_UP = (-1.5708, 0, 0)
-PALM_UP_TILTED_30 = (-1.5708 - math.radians(30), 0, 0)   # thesis 10.2: ~30 deg to horizontal
+PALM_UP_TILTED_30 = (-1.5708 - math.radians(30), 0, 0)   # thesis 8.4.2: the rotation tasks' hand
+# Thesis 10.2: the hand mounted about 30 degrees to the horizontal, fingers pointing down
+# towards the table, palm down over the tube.
+PALM_DOWN_TILTED_30 = (-1.5708 - math.radians(30), 0, 3.14159)
 
 
 def arm_and_hand(forearm_euler=PALM_DOWN):
@@ -563,14 +566,26 @@ def keypad_xml(planning=False):
     return base, labels
 
 
-# The tube scene's tube at rest on the table (centre at its radius), along world x, under the
-# proximal phalanges of the zero-pose hand: 5.5 mm clear of the hand. Its earlier place (y
-# -0.16) was inside the middle and distal phalanges (up to 30 mm deep: the fingertips of the
-# tilted zero-pose hand are 7-13 mm above the table), so the first step shot it away at about
-# 0.26 m/s. In front of the fingertips is out of their reach (at table height they reach
-# y <= -0.117 over all joint angles), so under the fingers is the one place where the fingers
-# start above the tube, as in thesis 10.4 ("the fingers keep tapping on the top of the tube").
-TUBE_ON_TABLE = (0.0, -0.23, 0.022)
+# The tube scene's tube at rest on the table, under the proximal phalanges of the palm-up
+# zero-pose hand (the rotation tasks start it elsewhere, in the hand).
+ROTATION_TUBE_ON_TABLE = (0.0, -0.23, 0.022)
+
+# The pickup scene (thesis 10.2, 11.3): the tube lies on the table under the palm, and its
+# initial orientation varies over 180 degrees about its centre, so the zero-pose hand must clear
+# a 28 cm tube lying at every yaw. A hand low enough to touch the tube clears it only along x
+# (its fingertips hang 7-13 mm above the table at a 25 cm mount); at a 30 cm mount the zero-pose
+# hand clears the tube by >= 7.5 mm at every yaw for centres between y -0.20 and -0.29
+# (fingertips 6 cm above the table), and the hand reaches it by flexing the wrist (WRJ0) and
+# fingers; finger-table contact is off, so the fingers can dig under the tube (10.2).
+TUBE_MOUNT = (0, -0.55, 0.30)
+# Centre of the tube: under the palm, where the flexed wrist brings the fingertips down in front
+# of it and the thumb behind it (the expert's clamp; adroit_teleop pickup_expert).
+TUBE_ON_TABLE = (0.0, -0.289, 0.022)
+# A coffee-bean tube rolls badly: the beans shift and damp it. Modelled as rolling and torsional
+# friction (condim 6); a frictionless-rolling capsule rolled out of every grasp the fingers
+# started, pushed away by the first touch.
+TUBE_GEOM = ('<geom name="C_object" type="capsule" size="0.022 0.12" quat="0.70711 0 0.70711 0" '
+             'mass="0.30" rgba="0.45 0.3 0.15 1" contype="3" conaffinity="3" condim="6" friction="1 0.01 0.01"/>')
 
 
 def scenes():
@@ -581,13 +596,17 @@ def scenes():
               (0, -0.55, 0.15), PALM_DOWN),
         Scene("arm_hand", "28-DOF arm-hand on the table, no object", True,
               (0, -0.85, 0.0), (0, 0, 0)),
-        Scene("tube", "in-hand rotation / pickup of a heavy coffee-bean tube; hand mounted "
-              "about 30 deg to the horizontal, palm up; finger-table contact disabled (thesis 10.2)",
+        Scene("tube", "in-hand rotation of a heavy coffee-bean tube (thesis 8.4.2); hand mounted "
+              "about 30 deg to the horizontal, palm up; finger-table contact disabled",
               False, (0, -0.55, 0.25), PALM_UP_TILTED_30,
-              objects=object_body(TUBE_ON_TABLE,
+              objects=object_body(ROTATION_TUBE_ON_TABLE,
                                   '<geom name="C_object" type="capsule" size="0.022 0.12" '
                                   'quat="0.70711 0 0.70711 0" mass="0.30" rgba="0.45 0.3 0.15 1" '
                                   'contype="3" conaffinity="3" condim="3"/>'),
+              object_qpos=list(ROTATION_TUBE_ON_TABLE) + [1, 0, 0, 0], table_touches_hand=False),
+        Scene("pickup", "pickup of a heavy coffee-bean tube from the table at any yaw (thesis 10.2, 11.3); "
+              "hand mounted about 30 deg to the horizontal, palm down; finger-table contact disabled",
+              False, TUBE_MOUNT, PALM_DOWN_TILTED_30, objects=object_body(TUBE_ON_TABLE, TUBE_GEOM),
               object_qpos=list(TUBE_ON_TABLE) + [1, 0, 0, 0], table_touches_hand=False),
         Scene("bottle", "dynamic manipulation: a bottle dropped onto the palm-up hand", False,
               (0, -0.55, 0.20), PALM_UP,

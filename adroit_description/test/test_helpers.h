@@ -20,7 +20,7 @@ struct SceneFacts {
 
 // From the issue: hand-only scenes have 40 cylinders, arm-hand 48; objects add a free joint.
 inline std::vector<SceneFacts> expectedScenes() {
-  return {{"hand", false, 0}, {"arm_hand", true, 0}, {"tube", false, 7},
+  return {{"hand", false, 0}, {"arm_hand", true, 0}, {"tube", false, 7}, {"pickup", false, 7},
           {"bottle", false, 7}, {"ball", true, 7},     {"keypad", false, 12},
           {"teleop_tube", false, 7, true}, {"teleop_ball", false, 7, true}};
 }

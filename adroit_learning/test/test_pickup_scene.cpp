@@ -1,4 +1,4 @@
-// The pickup tasks on the real tube scene (adroit_description): the geometry the criterion
+// The pickup tasks on the real pickup scene (adroit_description): the geometry the criterion
 // reads from the model, the initial tube pose the task files ask for (clear of the zero-pose
 // hand, resting on the table), and the trainer's outcome from a real initial state.
 #include <adroit_learning/pickup.h>
@@ -14,7 +14,7 @@ namespace {
 struct Model {
   Model() {
     char error[1000] = "";
-    m = mj_loadXML((std::string(ADROIT_MJCF_DIR) + "/tube.xml").c_str(), nullptr, error, sizeof(error));
+    m = mj_loadXML((std::string(ADROIT_MJCF_DIR) + "/pickup.xml").c_str(), nullptr, error, sizeof(error));
     if (m) d = mj_makeData(m);
     load_error = error;
   }
@@ -78,6 +78,12 @@ TEST(PickupScene, TaskFilesStartTheTubeOnTheTableClearOfTheZeroPoseHand) {
     bool on_table = false;
     EXPECT_GE(handPenetration(model, qpos, on_table), 0.0);
     EXPECT_TRUE(on_table);
+    // 11.3 varies the tube's orientation over 180 degrees: the zero-pose hand clears it at every one.
+    for (int yaw = 0; yaw < 180; yaw += 5) {
+      const std::vector<double> turned = adroit::initialQpos(model.m, task, {}, {}, yaw);
+      EXPECT_GE(handPenetration(model, turned, on_table), 0.0) << yaw << " deg";
+      EXPECT_TRUE(on_table) << yaw << " deg";
+    }
     EXPECT_NEAR(qpos[adr + 2], 0.022, 1e-12);  // resting: centre at the radius
   }
   // pickup.yaml's 10.4 weights.
@@ -113,7 +119,7 @@ TEST(PickupScene, YawTurnsTheTubeInTheModel) {
 
 TEST(PickupScene, OutcomeFromTheRealInitialState) {
   adroit::driver::SimConfig config;
-  config.model_path = std::string(ADROIT_MJCF_DIR) + "/tube.xml";
+  config.model_path = std::string(ADROIT_MJCF_DIR) + "/pickup.xml";
   config.mode = adroit::driver::ActuationMode::kPneumatic;
   adroit::SimRollouts sim(config, 1);
   adroit::TrainingTask task = adroit::findTrainingTask(TASK_DIR, "pickup");

@@ -227,4 +227,12 @@ void GloveEmulator::tick(double t, EmulatorOutput& out) {
   }
 }
 
+DeferredTrajectory::DeferredTrajectory(std::shared_ptr<const GloveTrajectory> motion) : motion_(std::move(motion)) {
+  if (!motion_) throw std::invalid_argument("DeferredTrajectory: no motion");
+}
+
+void DeferredTrajectory::sample(double t, std::uint8_t* out) const {
+  motion_->sample(t < start_ ? 0.0 : t - start_, out);
+}
+
 }  // namespace adroit::teleop

@@ -126,9 +126,10 @@ class Synthetic:
     quat_flip = 1.0          # s: from here on the odometry quaternion is negated (same rotation)
 
     def __init__(self, duration=2.0, metadata=METADATA, skip=(), actions=("force",), gap=None,
-                 backwards=False, bad_sizes=False):
+                 backwards=False, bad_sizes=False, press=None):
         self.duration, self.metadata, self.skip, self.actions = duration, metadata, set(skip), actions
         self.gap, self.backwards, self.bad_sizes = gap, backwards, bad_sizes
+        self.press = press  # s: the dead-man is pressed then (None: pressed from the start)
 
     # The signals, at relative time s.
     def q(self, j, s):
@@ -178,7 +179,9 @@ class Synthetic:
     def _write(self, bag):
         w = lambda topic, msg, s: None if topic in self.skip else bag.write(topic, msg, stamp(s))
         w("/adroit_teleop/metadata", String(data=self.metadata), 0.0)
-        w("/adroit_teleop/enabled", Bool(data=True), 0.0)
+        w("/adroit_teleop/enabled", Bool(data=self.press is None), 0.0)
+        if self.press is not None:
+            w("/adroit_teleop/enabled", Bool(data=True), self.press)
         js_times = self.joint_state_times()
         for i, s in enumerate(js_times):
             m = JointState(name=self.joints, position=[self.q(j, s) for j in range(3)],
@@ -380,6 +383,22 @@ class Export(DemosTestCase):
         self.assertEqual(b["dt"], [[0.04]])
         for k in (0, 1, 17, 49):
             self.assertAlmostEqual(b["t"][k][0], k * 0.04, delta=1e-9)
+
+    def test_export_starts_at_the_dead_man_press(self):
+        # Pressed 0.5 s in: the demonstration is what happened from then on, not the idle hand.
+        demo = Synthetic(press=0.5)
+        path = os.path.join(self.dir, "pressed_late.bag")
+        demo.write(path)
+        out = os.path.join(self.dir, "pressed_late.txt")
+        code, stdout, err = run("export", path, "--out", out)
+        self.assertEqual(code, 0, stdout + err)
+        with open(out) as f:
+            text = f.read()
+        blocks = parse_matrix_file(text)
+        # js last at 1.9983 s, t0 = the press at 0.5 s: floor(1.4983 / 0.04) + 1 samples.
+        self.assertEqual(len(blocks["X"]), 38)
+        self.assertAlmostEqual(blocks["X"][0][0], demo.q(0, 0.4983), delta=1e-12)  # newest at or before 0.5 s
+        self.assertIn("from %.9f" % (T0 + 0.5), text)
 
     def test_comments_describe_the_layout(self):
         header = [l for l in self.text.splitlines() if l.startswith("#")]

@@ -77,6 +77,25 @@ TEST(SyntheticTrajectory, SinusoidsWithSpreadPhases) {
   EXPECT_THROW(SyntheticTrajectory(22, 0.0), std::invalid_argument);
 }
 
+TEST(DeferredTrajectory, HoldsTheFirstSampleUntilStartedThenPlaysFromThere) {
+  auto motion = std::make_shared<SyntheticTrajectory>(22, 4.0);
+  DeferredTrajectory deferred(motion);
+  std::uint8_t held[22], expected[22];
+  motion->sample(0.0, expected);
+  for (double t : {0.0, 1.0, 7.3}) {  // a quarter period and more: the motion would have moved
+    deferred.sample(t, held);
+    EXPECT_EQ(std::vector<std::uint8_t>(held, held + 22), std::vector<std::uint8_t>(expected, expected + 22)) << t;
+  }
+  EXPECT_FALSE(deferred.started());
+  deferred.start(5.0);
+  EXPECT_TRUE(deferred.started());
+  deferred.sample(6.0, held);  // one second into the motion
+  motion->sample(1.0, expected);
+  EXPECT_EQ(std::vector<std::uint8_t>(held, held + 22), std::vector<std::uint8_t>(expected, expected + 22));
+  EXPECT_EQ(held[0], 228);
+  EXPECT_THROW(DeferredTrajectory(nullptr), std::invalid_argument);
+}
+
 TEST(GloveEmulator, PollAnswersOneRecordOfTheTrajectory) {
   GloveEmulator glove(EmulatorOptions{}, synthetic());
   const Bytes out = answer(glove, {'G'}, 1.0);

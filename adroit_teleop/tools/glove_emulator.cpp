@@ -7,6 +7,7 @@
 //   glove_emulator                                  # 22 sensors, synthetic motion, 120 Hz
 //   glove_emulator --sensors 18 --rate 500 --log /tmp/glove.log
 //   glove_emulator --trajectory recorded.csv --garbage-every 50 --unplug-after 5 --unplug-for 2
+//   glove_emulator --trajectory motion.csv --start-on-signal   # first row until SIGUSR1, then play
 //
 // --realtime-priority P streams under SCHED_FIFO P (it sleeps in ppoll between records): a real
 // glove streams from its own processor whatever the host does, and at normal scheduling the
@@ -40,10 +41,12 @@ namespace {
 const char* kUsage =
     "usage: glove_emulator [--link PATH] [--sensors 18|22] [--rate HZ] [--trajectory synthetic|FILE.csv]\n"
     "                      [--period S] [--garbage-every K] [--unplug-after S --unplug-for S] [--glove-error]\n"
-    "                      [--log FILE] [--seed N] [--duration S] [--realtime-priority P]";
+    "                      [--log FILE] [--seed N] [--duration S] [--realtime-priority P] [--start-on-signal]";
 
 volatile sig_atomic_t g_stop = 0;
 void onSignal(int) { g_stop = 1; }
+volatile sig_atomic_t g_start_motion = 0;  // SIGUSR1 with --start-on-signal
+void onStartSignal(int) { g_start_motion = 1; }
 
 timespec monotonicNow() {
   timespec ts{};
@@ -77,6 +80,7 @@ int main(int argc, char** argv) {
   std::string link = "/tmp/adroit_glove", trajectory = "synthetic", log_path;
   double period = 4, unplug_after = 0, unplug_for = 0, duration = 0;
   int realtime_priority = 0;
+  bool start_on_signal = false;
   EmulatorOptions options;
   // roslaunch appends its remappings (__name:=..., __log:=...): not options of ours.
   std::vector<char*> kept;
@@ -97,6 +101,7 @@ int main(int argc, char** argv) {
     else if (args.is("--seed")) options.seed = static_cast<std::uint32_t>(args.integer());
     else if (args.is("--duration")) duration = args.number();
     else if (args.is("--realtime-priority")) realtime_priority = static_cast<int>(args.integer());
+    else if (args.is("--start-on-signal")) start_on_signal = true;
     else args.unknown();
   }
   if (!validSensorCount(options.sensors)) args.fail("--sensors must be 18 or 22");
@@ -117,6 +122,8 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "glove_emulator: %s\n", e.what());
     return 2;
   }
+  std::shared_ptr<DeferredTrajectory> deferred;
+  if (start_on_signal) motion = deferred = std::make_shared<DeferredTrajectory>(motion);
   GloveEmulator glove(options, motion);
 
   FILE* log = nullptr;
@@ -143,6 +150,11 @@ int main(int argc, char** argv) {
   sa.sa_handler = onSignal;
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
+  if (start_on_signal) {  // SIGUSR1 may arrive any time: it only sets a flag the loop reads
+    struct sigaction start_action {};
+    start_action.sa_handler = onStartSignal;
+    sigaction(SIGUSR1, &start_action, nullptr);
+  }
 
   std::unique_ptr<PseudoTerminal> pty;
   try {
@@ -170,6 +182,11 @@ int main(int argc, char** argv) {
   while (!g_stop) {
     double now = secondsSince(start);
     if (duration > 0 && now >= duration) break;
+    if (deferred && g_start_motion && !deferred->started()) {
+      deferred->start(now);
+      std::printf("glove_emulator: motion started at %.3f s\n", now);
+      std::fflush(stdout);
+    }
     if (unplug_after > 0 && !unplugged && !replugged && now >= unplug_after) {
       pty.reset();  // the driver's reads see a hang-up; the link disappears
       glove.reset();

@@ -44,6 +44,25 @@ class SyntheticTrajectory : public GloveTrajectory {
   double period_;
 };
 
+// A trajectory that holds its first sample until started: the scripted expert's glove
+// (adroit_teleop pickup_expert) stays in the start pose while the scene is set up and the
+// dead-man pressed, and plays its motion from the moment start() is called, so the motion
+// begins where the demonstration's recording begins.
+class DeferredTrajectory : public GloveTrajectory {
+ public:
+  explicit DeferredTrajectory(std::shared_ptr<const GloveTrajectory> motion);  // throws std::invalid_argument for none
+  int sensors() const override { return motion_->sensors(); }
+  // motion(0) before start(); motion(t - start time) from then on.
+  void sample(double t, std::uint8_t* out) const override;
+  void start(double t) { start_ = t; }
+  bool started() const { return start_ < kNotStarted; }
+
+ private:
+  static constexpr double kNotStarted = 1e300;
+  std::shared_ptr<const GloveTrajectory> motion_;
+  double start_ = kNotStarted;
+};
+
 // Thrown by CsvTrajectory::load: "<file>:<line>: <what is wrong>" (or "<file>: ..." for the
 // whole file).
 class TrajectoryError : public std::runtime_error {

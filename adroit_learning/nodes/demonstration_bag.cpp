@@ -28,7 +28,7 @@ Demonstration exportDemonstration(const std::string& bag, double control_dt, con
   char dt[32];
   std::snprintf(dt, sizeof(dt), "%.9g", control_dt);
   const ProgramResult r = runProgram(
-      {"rosrun", "adroit_teleop", "demos", "export", bag, "--out", out, "--dt", dt, "--actions", "auto"}, options);
+      {"rosrun", "adroit_teleop", "demos", "export", bag, "--out", out, "--dt", dt, "--actions", "auto", "--commands", "mean"}, options);
   if (!r.ok()) {
     const std::string why = lastLine(r.output);
     throw DemonstrationError(why.empty() ? bag + ": demos export failed: " + r.describe() : why);

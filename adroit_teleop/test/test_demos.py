@@ -465,6 +465,35 @@ class Export(DemosTestCase):
         self.assertEqual(self.blocks["U"][k][2], 100.0 + n)
         self.assertEqual(self.blocks["U"][k][3], 30.0 + 0.01 * (n - 1))
 
+    def test_mean_commands_average_each_step(self):
+        # --commands mean: U is the mean of the held command over [t_k, t_k + dt), worked out
+        # here from the commands' recorded times (each held until the next one).
+        d = self.demo
+        out = os.path.join(self.dir, "export_mean.txt")
+        code, stdout, err = run("export", self.path, "--out", out, "--commands", "mean")
+        self.assertEqual(code, 0, stdout + err)
+        with open(out) as f:
+            text = f.read()
+        self.assertIn("the mean command over each step", text)
+        U = parse_matrix_file(text)["U"]
+        with rosbag.Bag(self.path) as bag:  # the recorded times as the bag keeps them (whole ns)
+            times = [t.to_sec() - T0 for _, _, t in bag.read_messages(topics=["/adroit/tendon_force_command"])]
+
+        def held_mean(c, a, b):
+            total = 0.0
+            for n, t in enumerate(times):
+                end = times[n + 1] if n + 1 < len(times) else b
+                total += max(0.0, min(b, end) - max(a, t)) * d.expected_command(n, c)
+            return total / (b - a)
+
+        for k in (0, 1, 7, 30):
+            start = times[0] + k * 0.04  # t0: the first command, the latest stream to start
+            for c in (0, 2):
+                self.assertAlmostEqual(U[k][c], held_mean(c, start, start + 0.04), delta=1e-9,
+                                       msg="cylinder %d, step %d" % (c, k))
+        # A held command differs from the step's mean where a command changed inside the step.
+        self.assertNotAlmostEqual(U[1][2], self.blocks["U"][1][2], delta=1e-3)
+
     def test_numbers_round_trip_exactly(self):
         d = self.demo
         s = self.sample_time(7)

@@ -16,7 +16,9 @@
 // The job runs on its own thread; callbacks only read or set its shared state, so status and
 // cancel answer while rollouts run.
 #include <adroit_description/scenes.h>
+#include <adroit_core/number_text.h>
 #include <adroit_learning/network_policy.h>
+#include <adroit_learning/policy_library.h>
 #include <adroit_learning/policy_loader.h>
 #include <adroit_learning/sim_rollouts.h>
 #include <adroit_learning/trainer.h>
@@ -36,6 +38,7 @@
 
 #include <adroit_core/mujoco_model.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
@@ -162,11 +165,6 @@ class TrainerNode {
 
   bool onTrain(adroit_msgs::Train::Request& req, adroit_msgs::Train::Response& res) {
     res.accepted = false;
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (busy()) {
-      res.message = busyMessage();
-      return true;
-    }
     res.message = countsProblem(req);
     if (!res.message.empty()) return true;
     TrainingTask task;
@@ -176,10 +174,17 @@ class TrainerNode {
       res.message = e.what();
       return true;
     }
-    std::optional<Demonstration> demonstration;
+    // Before the lock: exporting ten bags takes seconds, and status must answer meanwhile.
+    // Nothing of the node's state is touched here.
+    std::vector<Demonstration> demonstrations;
     if (!req.demonstrations.empty()) {
-      res.message = readDemonstration(req.demonstrations, task, demonstration);
+      res.message = readDemonstrations(req.demonstrations, task, demonstrations);
       if (!res.message.empty()) return true;
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (busy()) {
+      res.message = busyMessage();
+      return true;
     }
     TrainerSettings settings;
     settings.iterations = static_cast<int>(req.iterations);
@@ -209,28 +214,53 @@ class TrainerNode {
     state_ = "running";
     message_ = "starting";
     iteration_ = 0;
-    iterations_ = settings.iterations;
+    iterations_ = settings.iterations * static_cast<unsigned>(std::max<std::size_t>(1, demonstrations.size()));
     mean_cost_ = best_cost_ = std::numeric_limits<double>::quiet_NaN();
     success_rate_ = 0;
-    job_ = std::thread(&TrainerNode::runJob, this, task, settings, id, demonstration);
+    const std::size_t policies = demonstrations.size();
+    job_ = std::thread(&TrainerNode::runJob, this, task, settings, id, std::move(demonstrations));
     res.accepted = true;
     res.job_id = id;
     res.message = "training " + task.name + " for " + std::to_string(settings.iterations) + " iterations x " +
                   std::to_string(settings.samples) + " rollouts on backend " + backend_ + ", output in " +
-                  settings.output_dir + (demonstration ? ", imitating " + req.demonstrations : "");
+                  settings.output_dir +
+                  (policies == 0 ? "" : policies == 1 ? ", imitating " + req.demonstrations
+                                                      : ", " + std::to_string(policies) + " local policies, one per demonstration in " +
+                                                            req.demonstrations + " (library.txt)");
     return true;
   }
 
-  // The bag as a Demonstration fit for `task` (what `demos export` and the task-level checks
-  // say); "" when it is, else the one line that refuses the request. Nothing is trained then.
-  static std::string readDemonstration(const std::string& bag, const TrainingTask& task,
-                                       std::optional<Demonstration>& demonstration) {
+  // The demonstrations a request names, each fit for `task`: a bag, or a directory of bags (a
+  // library job: one local policy per bag, thesis 11.4). "" when every one is, else the one line
+  // that refuses the request; nothing is trained then.
+  static std::string readDemonstrations(const std::string& path, const TrainingTask& task,
+                                        std::vector<Demonstration>& demonstrations) {
+    std::vector<std::string> bags;
+    std::error_code error;
+    if (std::filesystem::is_directory(path, error)) {
+      for (const auto& entry : std::filesystem::directory_iterator(path, error))
+        if (entry.path().extension() == ".bag") bags.push_back(entry.path().string());
+      std::sort(bags.begin(), bags.end());
+      if (bags.empty()) return path + ": a directory without demonstration bags (*.bag)";
+    } else {
+      bags.push_back(path);
+    }
+    for (const std::string& bag : bags) {
+      demonstrations.emplace_back();
+      const std::string problem = readDemonstration(bag, task, demonstrations.back());
+      if (!problem.empty()) return problem;
+    }
+    return "";
+  }
+
+  // One bag as a Demonstration fit for `task` (what `demos export` and the task-level checks say).
+  static std::string readDemonstration(const std::string& bag, const TrainingTask& task, Demonstration& demonstration) {
     char work[] = "/tmp/adroit_demonstration_XXXXXX";
     if (!::mkdtemp(work)) return "cannot make a temporary directory for the demonstration: " + std::string(std::strerror(errno));
     std::string problem;
     try {
       demonstration = exportDemonstration(bag, task.control_dt, work);
-      problem = demonstrationTaskMismatch(*demonstration, task);
+      problem = demonstrationTaskMismatch(demonstration, task);
     } catch (const DemonstrationError& e) {
       problem = e.what();
     }
@@ -249,35 +279,40 @@ class TrainerNode {
     settings.initial_actions = demonstrationActions(demo, layout, task.horizon);
   }
 
-  void runJob(TrainingTask task, TrainerSettings settings, std::string id, std::optional<Demonstration> demonstration) {
+  // Which local policy of a library job is training (0 of 1 for a single policy).
+  struct JobPart {
+    int index = 0, count = 1;
+  };
+
+  // A job: one policy, or with several demonstrations a library job (thesis 11.4-11.5): one
+  // local policy per demonstration, each in <output_dir>/yaw_NNN, then <output_dir>/library.txt.
+  void runJob(TrainingTask task, TrainerSettings settings, std::string id, std::vector<Demonstration> demonstrations) {
     std::string state = "failed", message;
     try {
       std::unique_ptr<RolloutBackend> backend = makeBackend(task, backend_);
-      if (demonstration) imitate(*demonstration, *backend, task, settings);
-      auto trainer = std::make_shared<Trainer>(task, settings, *backend);
-      {
-        std::lock_guard<std::mutex> lock(mutex_);
-        trainer_ = trainer;
-        if (cancel_requested_) trainer->cancel();
-      }
-      ROS_INFO("adroit_learning: job %s: %s, %d iterations x %d rollouts, state %d, actions %d, backend %s",
-               id.c_str(), task.name.c_str(), settings.iterations, settings.samples, trainer->layout().nx(),
-               trainer->layout().nu(), backend->name().c_str());
-      while (!trainer->finished() && !trainer->cancelled()) {
-        const IterationReport r = trainer->iterate();
-        publish(id, task, settings, r);
-        if (plot_) plot(settings.output_dir);
-      }
-      if (trainer->cancelled()) {
-        state = "cancelled";
-        message = "cancelled at iteration " + std::to_string(trainer->iteration());
+      if (demonstrations.empty()) {
+        state = trainPolicy(task, settings, *backend, id, {}) ? "finished" : "cancelled";
       } else {
-        writePolicyFile(settings.output_dir + "/final.tvlg",
-                        trainer->policyFile(trainer->controller(), trainer->iteration(),
-                                            std::numeric_limits<double>::quiet_NaN()));
-        state = "finished";
-        message = "done; policies and learning_curve.csv in " + settings.output_dir;
+        PolicyLibrary library{task.name, task.scene, {}};
+        const int count = static_cast<int>(demonstrations.size());
+        for (int k = 0; k < count && state != "cancelled"; ++k) {
+          TrainingTask local = task;
+          TrainerSettings local_settings = settings;
+          imitate(demonstrations[k], *backend, local, local_settings);
+          if (count > 1) local_settings.output_dir = settings.output_dir + "/" + yawDirectory(*local.initial_object_yaw);
+          if (!trainPolicy(local, local_settings, *backend, id, {k, count})) state = "cancelled";
+          library.entries.push_back({local.initial_object_yaw.value_or(0.0),
+                                     local_settings.output_dir.substr(settings.output_dir.size() + (count > 1 ? 1 : 0)) +
+                                         (count > 1 ? "/" : "") + "final.tvlg", nullptr, ""});
+        }
+        if (state != "cancelled") {
+          state = "finished";
+          if (count > 1) writePolicyLibrary(settings.output_dir + "/library.txt", library);
+        }
       }
+      message = state == "cancelled" ? "cancelled at iteration " + std::to_string(iteration_)
+                                     : "done; policies and learning_curve.csv in " + settings.output_dir +
+                                           (demonstrations.size() > 1 ? " (library.txt: one local policy per demonstration)" : "");
     } catch (const std::exception& e) {
       ROS_ERROR("adroit_learning: job %s failed: %s", id.c_str(), e.what());
       message = e.what();
@@ -285,6 +320,36 @@ class TrainerNode {
     // Only now, with the backend gone (its subscriptions closed), may another job or an
     // execute_policy call take the robot.
     finish(state, message);
+  }
+
+  static std::string yawDirectory(double yaw_deg) {
+    char name[32];
+    std::snprintf(name, sizeof(name), "yaw_%05.1f", yaw_deg);
+    return name;
+  }
+
+  // Trains one policy to its final.tvlg; false when cancelled.
+  bool trainPolicy(const TrainingTask& task, const TrainerSettings& settings, RolloutBackend& backend,
+                   const std::string& id, JobPart part) {
+    auto trainer = std::make_shared<Trainer>(task, settings, backend);
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      trainer_ = trainer;
+      if (cancel_requested_) trainer->cancel();
+    }
+    ROS_INFO("adroit_learning: job %s: %s, policy %d/%d%s, %d iterations x %d rollouts, state %d, actions %d, backend %s",
+             id.c_str(), task.name.c_str(), part.index + 1, part.count,
+             task.initial_object_yaw ? (" (yaw " + shortNumber(*task.initial_object_yaw) + " deg)").c_str() : "",
+             settings.iterations, settings.samples, trainer->layout().nx(), trainer->layout().nu(), backend.name().c_str());
+    while (!trainer->finished() && !trainer->cancelled()) {
+      const IterationReport r = trainer->iterate();
+      publish(id, task, settings, r, part);
+      if (plot_) plot(settings.output_dir);
+    }
+    if (trainer->cancelled()) return false;
+    writePolicyFile(settings.output_dir + "/final.tvlg",
+                    trainer->policyFile(trainer->controller(), trainer->iteration(), std::numeric_limits<double>::quiet_NaN()));
+    return true;
   }
 
   void finish(const std::string& state, const std::string& message) {
@@ -297,7 +362,7 @@ class TrainerNode {
   }
 
   void publish(const std::string& id, const TrainingTask& task, const TrainerSettings& settings,
-               const IterationReport& r) {
+               const IterationReport& r, JobPart part) {
     adroit_msgs::TrainProgress m;
     m.header.stamp = ros::Time::now();
     m.job_id = id;
@@ -320,6 +385,9 @@ class TrainerNode {
     m.cost_s = r.cost_s;
     m.update_s = r.update_s;
     m.policy_path = r.policy_path;
+    m.policy = static_cast<std::uint32_t>(part.index);
+    m.policies = static_cast<std::uint32_t>(part.count);
+    m.initial_object_yaw = task.initial_object_yaw.value_or(std::numeric_limits<double>::quiet_NaN());
     progress_pub_.publish(m);
     if (r.ok)
       ROS_INFO("adroit_learning: %s iteration %d/%d: cost %.4g +- %.3g, joint rms %.3f rad, %d/%d ok, KL %.3g "
@@ -330,13 +398,14 @@ class TrainerNode {
       ROS_WARN("adroit_learning: %s iteration %d/%d: %s", task.name.c_str(), r.iteration + 1, settings.iterations,
                r.message.c_str());
     std::lock_guard<std::mutex> lock(mutex_);
-    iteration_ = r.iteration + 1;
+    iteration_ = part.index * settings.iterations + r.iteration + 1;  // over the whole job
     if (r.ok) {
       mean_cost_ = r.cost_mean;
       if (!(best_cost_ <= r.cost_mean)) best_cost_ = r.cost_mean;
       success_rate_ = r.samples > 0 ? static_cast<double>(r.successes) / r.samples : 0.0;
     }
-    message_ = r.ok ? "iteration " + std::to_string(r.iteration + 1) + " done" : r.message;
+    message_ = (part.count > 1 ? "policy " + std::to_string(part.index + 1) + "/" + std::to_string(part.count) + ": " : "") +
+               (r.ok ? "iteration " + std::to_string(r.iteration + 1) + " done" : r.message);
   }
 
   void plot(const std::string& dir) {

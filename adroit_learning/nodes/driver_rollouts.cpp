@@ -46,14 +46,16 @@ bool callRetryingTransport(ros::ServiceClient& client, Service& service) {
 
 }  // namespace
 
-DriverConnection::DriverConnection(ros::NodeHandle& nh, const std::string& ns, double timeout, Pacing pacing)
-    : ns_(ns), timeout_(timeout), pacing_(pacing) {
+DriverConnection::DriverConnection(ros::NodeHandle& nh, const std::string& ns, double timeout, Pacing pacing,
+                                   std::vector<std::string> touch)
+    : ns_(ns), timeout_(timeout), touch_names_(std::move(touch)), pacing_(pacing) {
   ros::NodeHandle d(nh, ns);
   const ros::TransportHints hints = ros::TransportHints().tcpNoDelay();
   joints_sub_ = d.subscribe("joint_states", 20, &DriverConnection::onJoints, this, hints);
   actuators_sub_ = d.subscribe("actuator_states", 20, &DriverConnection::onActuators, this, hints);
   odom_sub_ = d.subscribe("object/odom", 20, &DriverConnection::onOdometry, this, hints);
   safe_sub_ = d.subscribe("safe_state", 1, &DriverConnection::onSafeState, this);
+  if (!touch_names_.empty()) touch_sub_ = d.subscribe("touch", 20, &DriverConnection::onTouch, this, hints);
   valve_pub_ = d.advertise<adroit_msgs::ValveCommand>("valve_command", 10);
   // Only the lockstep step service (called every control step) keeps its connection open.
   // Destroying a persistent client can race in roscpp (ros_comm #1989: a dropped connection's
@@ -71,7 +73,7 @@ DriverConnection::~DriverConnection() {
   // writes (the latest messages, the mutex) are destroyed before the subscribers would be.
   // shutdown() waits for a callback in progress (ASan: heap-use-after-free of the latest
   // actuator state when execute_policy ended while states still arrived).
-  for (ros::Subscriber* s : {&joints_sub_, &actuators_sub_, &odom_sub_, &safe_sub_}) s->shutdown();
+  for (ros::Subscriber* s : {&joints_sub_, &actuators_sub_, &odom_sub_, &safe_sub_, &touch_sub_}) s->shutdown();
   // Realtime: when the keep-alive ends the driver's command watchdog takes it to its safe
   // state, as it must on hardware. A simulation driver is paused instead (its watchdog runs on
   // its clock), and the next job starts it again.
@@ -144,6 +146,10 @@ void DriverConnection::onOdometry(const nav_msgs::Odometry::ConstPtr& msg) {
   std::lock_guard<std::mutex> lock(mutex_);
   odom_ = msg;
   cv_.notify_all();
+}
+void DriverConnection::onTouch(const adroit_msgs::Touch::ConstPtr& msg) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  touch_ = msg;
 }
 void DriverConnection::onSafeState(const std_msgs::Bool::ConstPtr& msg) {
   std::lock_guard<std::mutex> lock(mutex_);
@@ -386,6 +392,7 @@ bool DriverConnection::waitForState(ros::Time min_stamp, Observation& obs, std::
   obs.joint_position = joints_->position;
   obs.joint_velocity = joints_->velocity;
   obs.pressure = actuators_->pressure;
+  if (!touchFromMessage(obs.touch, error)) return false;
   if (odom_) {
     // Odometry carries both velocities in the object frame; the state, as the driver's
     // signals, has the linear one in the world frame.
@@ -402,10 +409,35 @@ bool DriverConnection::waitForState(ros::Time min_stamp, Observation& obs, std::
   return true;
 }
 
+// The touch sensors of touch_names_ from the newest touch message, by name (a driver may list
+// more). None yet, or one missing: the robot cannot give what a touch-reading policy needs.
+bool DriverConnection::touchFromMessage(std::vector<double>& touch, std::string& error) const {
+  touch.resize(touch_names_.size());
+  if (touch_names_.empty()) return true;
+  if (!touch_) {
+    error = "driver " + ns_ + ": no touch message yet on " + ns_ + "/touch";
+    return false;
+  }
+  for (std::size_t i = 0; i < touch_names_.size(); ++i) {
+    const auto it = std::find(touch_->name.begin(), touch_->name.end(), touch_names_[i]);
+    if (it == touch_->name.end() || static_cast<std::size_t>(it - touch_->name.begin()) >= touch_->force.size()) {
+      error = "driver " + ns_ + ": its touch message has no sensor '" + touch_names_[i] + "'";
+      return false;
+    }
+    touch[i] = touch_->force[it - touch_->name.begin()];
+  }
+  return true;
+}
+
 DriverRollouts::DriverRollouts(ros::NodeHandle& nh, const std::vector<std::string>& namespaces, ModelPtr model,
                                double timeout, Pacing pacing)
     : model_(std::move(model)) {
-  for (const auto& ns : namespaces) drivers_.push_back(std::make_unique<DriverConnection>(nh, ns, timeout, pacing));
+  std::vector<std::string> model_touch;
+  for (int s = 0; s < model_->nsensor; ++s)
+    if (model_->sensor_type[s] == mjSENS_TOUCH) model_touch.push_back(mj_id2name(model_.get(), mjOBJ_SENSOR, s));
+  for (int i : fingertipTouch(model_touch)) touch_.push_back(model_touch[i]);
+  for (const auto& ns : namespaces)
+    drivers_.push_back(std::make_unique<DriverConnection>(nh, ns, timeout, pacing, touch_));
   for (auto& d : drivers_) {
     std::string error;
     if (!d->waitForStreams(error)) throw std::runtime_error(error);

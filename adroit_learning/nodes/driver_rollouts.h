@@ -22,6 +22,7 @@
 #include <adroit_core/pi_mutex.h>
 #include <adroit_learning/rollout_backend.h>
 #include <adroit_msgs/ActuatorStates.h>
+#include <adroit_msgs/Touch.h>
 #include <adroit_msgs/ValveCommand.h>
 #include <mujoco/mujoco.h>
 #include <nav_msgs/Odometry.h>
@@ -44,7 +45,9 @@ enum class Pacing { kLockstep, kRealtime };
 // One driver: its topics and services under `ns` (e.g. /adroit).
 class DriverConnection {
  public:
-  DriverConnection(ros::NodeHandle& nh, const std::string& ns, double timeout, Pacing pacing);
+  // touch: the sensors Observation::touch reports, in order (fingertipTouch of the model's).
+  DriverConnection(ros::NodeHandle& nh, const std::string& ns, double timeout, Pacing pacing,
+                   std::vector<std::string> touch = {});
   ~DriverConnection();
   const std::string& ns() const { return ns_; }
   // Waits (up to the timeout) until the driver has published joint and actuator states.
@@ -84,22 +87,25 @@ class DriverConnection {
   void onActuators(const adroit_msgs::ActuatorStates::ConstPtr& msg);
   void onOdometry(const nav_msgs::Odometry::ConstPtr& msg);
   void onSafeState(const std_msgs::Bool::ConstPtr& msg);
+  void onTouch(const adroit_msgs::Touch::ConstPtr& msg);
   bool safe(std::string& error);
   bool step(int steps, std::string& error);
   bool waitForState(ros::Time min_stamp, Observation& obs, std::string& error);
   void publish(const std::vector<double>& volts);
+  bool touchFromMessage(std::vector<double>& touch, std::string& error) const;
   void keepAlive();
   // Realtime: the valves are held at `volts` from now on (the keep-alive publishes at once).
   void holdAt(std::vector<double> volts);
 
   std::string ns_;
   double timeout_;
+  std::vector<std::string> touch_names_;
   static constexpr double kRealResetSettle = 2.0;  // s, every cylinder exhausted before a rollout on a real robot
   static constexpr double kExhaustVolts = -5.0;
   std::uint64_t resets_by_control_ = 0;
   bool resetByControl(std::size_t cylinders, double hold_volts, std::string& error);
   Pacing pacing_;
-  ros::Subscriber joints_sub_, actuators_sub_, odom_sub_, safe_sub_;
+  ros::Subscriber joints_sub_, actuators_sub_, odom_sub_, safe_sub_, touch_sub_;
   ros::Publisher valve_pub_;
   ros::ServiceClient step_client_, reset_client_, pause_client_;
   std::mutex mutex_;
@@ -107,6 +113,7 @@ class DriverConnection {
   sensor_msgs::JointState::ConstPtr joints_;
   adroit_msgs::ActuatorStates::ConstPtr actuators_;
   nav_msgs::Odometry::ConstPtr odom_;
+  adroit_msgs::Touch::ConstPtr touch_;  // the newest (published with the joint states)
   bool safe_state_ = false;
   ros::Time sim_time_, last_stamp_, reset_floor_;
   ros::Time next_tick_, last_observed_;  // realtime pacing
@@ -135,6 +142,7 @@ class DriverRollouts : public RolloutBackend {
   std::vector<std::string> jointNames() const override { return joints_; }
   std::vector<std::string> cylinderNames() const override { return cylinders_; }
   bool hasObject() const override { return has_object_; }
+  std::vector<std::string> touchNames() const override { return touch_; }
   std::vector<double> jointRanges() const override;
   ObjectGeometry objectGeometry() const override;
   Eigen::VectorXd initialState(const TrainingTask& task, const StateLayout& layout) override;
@@ -154,7 +162,7 @@ class DriverRollouts : public RolloutBackend {
                        const RolloutRequest& request, int steps, Act&& act, const std::atomic<bool>& cancel);
   ModelPtr model_;
   std::vector<std::unique_ptr<DriverConnection>> drivers_;
-  std::vector<std::string> joints_, cylinders_;
+  std::vector<std::string> joints_, cylinders_, touch_;
   bool has_object_ = false;
 };
 

@@ -105,7 +105,9 @@ void observe(const driver::SimulatedRobot& robot, Observation& obs) {
   obs.joint_position = s.joint_position;
   obs.joint_velocity = s.joint_velocity;
   obs.pressure = s.pressure;
-  obs.touch = s.touch;
+  const std::vector<int> tips = fingertipTouch(robot.touchNames());  // a handful of names
+  obs.touch.resize(tips.size());
+  for (std::size_t i = 0; i < tips.size(); ++i) obs.touch[i] = s.touch[tips[i]];
   obs.object = s.object;
 }
 
@@ -113,6 +115,12 @@ SimRollouts::SimRollouts(const driver::SimConfig& config, int workers)
     : pool_(workers > 0 ? static_cast<std::size_t>(workers) : std::max(1u, std::thread::hardware_concurrency())) {
   for (std::size_t w = 0; w < pool_.size(); ++w) robots_.push_back(std::make_unique<driver::SimulatedRobot>(config));
   start_ = robots_.front()->state();
+}
+
+std::vector<std::string> SimRollouts::touchNames() const {
+  std::vector<std::string> names;
+  for (int i : fingertipTouch(robots_.front()->touchNames())) names.push_back(robots_.front()->touchNames()[i]);
+  return names;
 }
 
 std::vector<double> SimRollouts::jointRanges() const {

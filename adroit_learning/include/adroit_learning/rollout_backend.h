@@ -52,7 +52,8 @@ class RolloutBackend {
   virtual std::vector<std::string> jointNames() const = 0;
   virtual std::vector<std::string> cylinderNames() const = 0;
   virtual bool hasObject() const = 0;
-  // The robot's touch sensors, in the order Observation::touch reports them (none by default).
+  // The touch sensors Observation::touch reports, in its order (none by default): the
+  // fingertips' (fingertipTouch), which a network policy reads (thesis 11.6).
   virtual std::vector<std::string> touchNames() const { return {}; }
   // Range (rad) of each joint of jointNames(): initial-state noise is a fraction of it.
   virtual std::vector<double> jointRanges() const = 0;
@@ -77,6 +78,17 @@ class RolloutBackend {
     throw std::logic_error("rollout backend '" + name() + "' cannot run a Policy");
   }
 };
+
+// The fingertip touch sensors among a robot's (names ending in "tip", in their order): what
+// the thesis' network reads (11.6, "tactile sensors in the fingertips") and what the hardware's
+// palm board reports (adroit_driver can_mapping.h: the same rule), so a network trained on the
+// simulation runs on the robot. Their indices in `names`.
+inline std::vector<int> fingertipTouch(const std::vector<std::string>& names) {
+  std::vector<int> tips;
+  for (std::size_t i = 0; i < names.size(); ++i)
+    if (names[i].size() >= 3 && names[i].compare(names[i].size() - 3, 3, "tip") == 0) tips.push_back(static_cast<int>(i));
+  return tips;
+}
 
 // "" when the request's object yaw override is absent or in [0, 180) degrees, else why not.
 inline std::string objectYawProblem(const RolloutRequest& request) {

@@ -42,7 +42,7 @@ class SimRollouts : public RolloutBackend {
   std::vector<std::string> jointNames() const override { return robots_.front()->jointNames(); }
   std::vector<std::string> cylinderNames() const override { return robots_.front()->cylinderNames(); }
   bool hasObject() const override { return robots_.front()->hasObject(); }
-  std::vector<std::string> touchNames() const override { return robots_.front()->touchNames(); }
+  std::vector<std::string> touchNames() const override;
   std::vector<double> jointRanges() const override;
   ObjectGeometry objectGeometry() const override { return adroit::objectGeometry(robots_.front()->model()); }
   Eigen::VectorXd initialState(const TrainingTask& task, const StateLayout& layout) override;
@@ -68,7 +68,8 @@ class SimRollouts : public RolloutBackend {
   ThreadPool pool_;
 };
 
-// Fills an Observation from the simulated robot's sensed signals (what the driver publishes).
+// Fills an Observation from the simulated robot's sensed signals (what the driver publishes);
+// touch: the fingertip sensors (fingertipTouch).
 void observe(const driver::SimulatedRobot& robot, Observation& obs);
 
 }  // namespace adroit

@@ -19,8 +19,8 @@ namespace adroit {
 struct Observation {
   std::vector<double> joint_position, joint_velocity;  // the robot's 1-DOF joints
   std::vector<double> pressure;                        // Pa absolute, per cylinder
-  // Touch sensors (N, the robot's order; empty when the backend has none). Not part of the
-  // TVLG state x: network policies read it (thesis 11.6, inputs with touch).
+  // Fingertip touch sensors (N, RolloutBackend::touchNames order; empty when the backend has
+  // none). Not part of the TVLG state x: network policies read it (thesis 11.6).
   std::vector<double> touch;
   // Free object: position, quaternion w x y z, linear velocity (world), angular velocity
   // (object frame). Ignored when the layout has no object.

@@ -1,5 +1,6 @@
 #include "adroit_learning/demonstration.h"
 
+#include <adroit_core/word_list.h>
 #include <adroit_core/bounded_file.h>
 #include <adroit_core/number_text.h>
 #include <adroit_learning/matrix_file.h>
@@ -33,13 +34,6 @@ std::map<std::string, std::string> headerLines(const std::string& text) {
   return header;
 }
 
-std::vector<std::string> words(const std::string& text) {
-  std::istringstream in(text);
-  std::vector<std::string> out;
-  for (std::string w; in >> w;) out.push_back(w);
-  return out;
-}
-
 const std::string& required(const std::map<std::string, std::string>& header, const std::string& key,
                             const std::string& path) {
   const auto it = header.find(key);
@@ -52,10 +46,10 @@ void fillFromHeader(const std::map<std::string, std::string>& header, Demonstrat
   demo.task = required(header, "task", demo.path);
   demo.mode = required(header, "mode", demo.path);
   demo.model = required(header, "model", demo.path);
-  demo.joints = words(required(header, "joints", demo.path));
-  demo.cylinders = words(required(header, "cylinders", demo.path));
+  demo.joints = splitWords(required(header, "joints", demo.path));
+  demo.cylinders = splitWords(required(header, "cylinders", demo.path));
   demo.has_object = required(header, "object", demo.path).rfind("yes", 0) == 0;
-  const std::vector<std::string> actions = words(required(header, "actions", demo.path));
+  const std::vector<std::string> actions = splitWords(required(header, "actions", demo.path));
   demo.actions = actions.empty() ? "" : actions.front();
 }
 

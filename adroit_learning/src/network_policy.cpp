@@ -1,5 +1,6 @@
 #include "adroit_learning/network_policy.h"
 
+#include <adroit_core/word_list.h>
 #include <adroit_learning/policy_loader.h>
 
 #include <adroit_core/bounded_file.h>
@@ -38,19 +39,6 @@ bool parseWholeNumber(const std::string& text, long& out) {
   errno = 0;
   out = std::strtol(text.c_str(), &end, 10);
   return errno == 0 && *end == '\0';
-}
-
-std::string joined(const std::vector<std::string>& names) {
-  std::string s;
-  for (const auto& n : names) s += " " + n;
-  return s;
-}
-
-std::vector<std::string> words(const std::string& text) {
-  std::istringstream in(text);
-  std::vector<std::string> out;
-  for (std::string w; in >> w;) out.push_back(w);
-  return out;
 }
 
 // "entry 3 is 'a' where the robot has 'b'", or the counts when one list is a prefix.
@@ -97,7 +85,7 @@ NetworkInput::NetworkInput(ObservationSet set, const std::string& state_layout, 
     throw std::invalid_argument("touch sensor count " + std::to_string(touch_count) + " is outside [0, " +
                                 std::to_string(kMaxNames) + "]");
   const bool keep_object = set == ObservationSet::full;
-  for (const std::string& block : words(state_layout)) {
+  for (const std::string& block : splitWords(state_layout)) {
     const auto colon = block.rfind(':');
     long length = 0;
     if (colon == std::string::npos || colon == 0 || !parseWholeNumber(block.substr(colon + 1), length) ||
@@ -399,7 +387,7 @@ const std::vector<std::string>& headerKeys() {
 Header parseHeader(const std::string& path, const std::string& text) {
   std::size_t pos = text.find('\n');
   const std::string first = text.substr(0, pos == std::string::npos ? text.size() : pos);
-  const std::vector<std::string> magic = words(first);
+  const std::vector<std::string> magic = splitWords(first);
   if (magic.size() != 2 || magic[0] != kMagic)
     throw PolicyFileError(path + ": not an adroit network policy (first line '" + first.substr(0, 60) + "')");
   if (magic[1] != std::to_string(kNetworkPolicyFormatVersion))
@@ -449,10 +437,10 @@ NetworkPolicyMetadata readMetadata(const std::string& path, const std::map<std::
   } catch (const std::invalid_argument& e) {
     throw PolicyFileError(path + ": header field 'observation': " + e.what());
   }
-  m.joints = words(fields.at("joints"));
-  m.cylinders = words(fields.at("cylinders"));
-  m.touch = words(fields.at("touch"));
-  m.actions = words(fields.at("actions"));
+  m.joints = splitWords(fields.at("joints"));
+  m.cylinders = splitWords(fields.at("cylinders"));
+  m.touch = splitWords(fields.at("touch"));
+  m.actions = splitWords(fields.at("actions"));
   m.state_layout = fields.at("state_layout");
   const std::string problem = m.validate();
   if (!problem.empty()) throw PolicyFileError(path + ": header: " + problem);
@@ -482,10 +470,10 @@ void writeNetworkPolicyFile(const std::string& path, const NetworkPolicy& policy
       << "units " << policy.spec().units << "\n"
       << "inputs " << policy.inputSize() << "\n"
       << "state_layout " << m.state_layout << "\n"
-      << "joints" << joined(m.joints) << "\n"
-      << "cylinders" << joined(m.cylinders) << "\n"
-      << "touch" << joined(m.touch) << "\n"
-      << "actions" << joined(m.actions) << "\n"
+      << "joints" << joinWords(m.joints) << "\n"
+      << "cylinders" << joinWords(m.cylinders) << "\n"
+      << "touch" << joinWords(m.touch) << "\n"
+      << "actions" << joinWords(m.actions) << "\n"
       << kMatricesLine << "\n";
   MatrixFile blocks(path);
   const NetworkNormalisation& n = policy.normalisation();

@@ -1,5 +1,6 @@
 #include "adroit_learning/policy_file.h"
 
+#include <adroit_core/word_list.h>
 #include <adroit_core/bounded_file.h>
 
 #include <algorithm>
@@ -18,19 +19,6 @@ namespace {
 
 constexpr const char* kMagic = "adroit_tvlg_policy";
 constexpr const char* kMatrices = "matrices";
-
-std::string joinNames(const std::vector<std::string>& names) {
-  std::string s;
-  for (const auto& n : names) s += " " + n;
-  return s;
-}
-
-std::vector<std::string> splitNames(const std::string& text) {
-  std::istringstream in(text);
-  std::vector<std::string> out;
-  for (std::string n; in >> n;) out.push_back(n);
-  return out;
-}
 
 std::string formatDouble(double x) {
   char buf[40];
@@ -94,9 +82,9 @@ void writePolicyFile(const std::string& path, const PolicyFile& p) {
       << "cost_mean " << formatDouble(p.cost_mean) << "\n"
       << "locked_command " << formatDouble(p.locked_command) << "\n"
       << "state_layout " << p.state_layout << "\n"
-      << "joints" << joinNames(p.joints) << "\n"
-      << "cylinders" << joinNames(p.cylinders) << "\n"
-      << "actions" << joinNames(p.actions) << "\n"
+      << "joints" << joinWords(p.joints) << "\n"
+      << "cylinders" << joinWords(p.cylinders) << "\n"
+      << "actions" << joinWords(p.actions) << "\n"
       << kMatrices << "\n";
   MatrixFile matrices(path);
   writeController(p.controller, matrices);
@@ -158,9 +146,9 @@ PolicyFile readPolicyFile(const std::string& path) {
   p.iteration = static_cast<int>(iteration);
   p.cost_mean = number("cost_mean");
   p.locked_command = number("locked_command");
-  p.joints = splitNames(field("joints"));
-  p.cylinders = splitNames(field("cylinders"));
-  p.actions = splitNames(field("actions"));
+  p.joints = splitWords(field("joints"));
+  p.cylinders = splitWords(field("cylinders"));
+  p.actions = splitWords(field("actions"));
   if (!(p.control_dt > 0)) throw PolicyFileError(path + ": header field 'control_dt' must be positive");
   text.erase(0, pos);  // the matrices
   try {

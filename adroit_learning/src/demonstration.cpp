@@ -132,6 +132,7 @@ void imitateDemonstration(const Demonstration& demo, const StateLayout& layout, 
   for (int t = 0; t <= task.horizon; ++t)
     for (int j = 0; j < layout.joints(); ++j) task.joint_reference[t][j] = demo.x(layout.q() + j, t);
   if (task.initial_object_yaw) task.initial_object_yaw = tubeYawFromState(demo.x.col(0), layout, geometry);
+  if (task.imitation_variance > 0) task.initial_variance = task.imitation_variance;
 }
 
 Eigen::MatrixXd demonstrationActions(const Demonstration& demo, const StateLayout& layout, int horizon) {

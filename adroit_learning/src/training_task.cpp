@@ -88,7 +88,7 @@ const std::set<std::string> kKnownFields = {
     "initial_object_position",
     "initial_pressure", "target_joints", "joint_weight", "final_joint_weight", "action_weight",
     "object_position_weight", "object_rotation_weight", "final_scale", "rotation_axis", "rotation_target",
-    "locked_cylinders", "locked_command", "initial_command", "initial_variance", "epsilon",
+    "locked_cylinders", "locked_command", "initial_command", "initial_variance", "imitation_variance", "epsilon",
     "success_joint_rms", "success_angle", "drop_height", "initial_object_yaw", "object_position_target",
     "object_height_weight", "object_height_target", "success_criterion"};
 
@@ -196,6 +196,7 @@ TrainingTask loadTrainingTask(const std::string& path) {
   task.locked_command = r.number("locked_command", -5, 5, false, 0);
   task.initial_command = r.number("initial_command", -5, 5, false, 0);
   task.initial_variance = r.number("initial_variance", 1e-6, 25, false, task.initial_variance);
+  task.imitation_variance = r.number("imitation_variance", 0, 25, false, task.imitation_variance);
   task.epsilon = r.number("epsilon", 1e-6, 1e6, false, task.epsilon);
   task.success_joint_rms = r.number("success_joint_rms", 0, 10, false, task.success_joint_rms);
   task.success_angle = r.number("success_angle", 0, 10, false, task.success_angle);

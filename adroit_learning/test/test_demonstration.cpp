@@ -31,6 +31,8 @@ adroit::TrainingTask pickupTask() {
   task.initial_object_yaw = 0.0;
   task.object_height_weight = 50;
   task.success_criterion = "pickup";
+  task.initial_variance = 0.2;
+  task.imitation_variance = 0.005;
   return task;
 }
 
@@ -161,6 +163,7 @@ TEST(Demonstration, ImitationTakesQHatTheFirstControlsAndTheTubeYaw) {
   EXPECT_DOUBLE_EQ(task.joint_reference[3][0], 0.3);
   EXPECT_DOUBLE_EQ(task.joint_reference[3][1], -0.6);
   EXPECT_NEAR(*task.initial_object_yaw, 30.0, 1e-9);
+  EXPECT_DOUBLE_EQ(task.initial_variance, 0.005);  // "small random noise" around its controls
   const Eigen::MatrixXd u = adroit::demonstrationActions(demo, layout, task.horizon);
   ASSERT_EQ(u.rows(), 3);
   ASSERT_EQ(u.cols(), 3);

@@ -55,7 +55,8 @@ std::string demonstrationMismatch(const Demonstration& demo, const TrainingTask&
 // What imitation changes in the task (thesis 10.4): q_hat_t = the demonstration's joints at
 // steps 0..T (joint_reference) and, for a task with initial_object_yaw, the tube's initial yaw
 // as the demonstration started it (tubeYawFromState), so the local policy trains on the
-// demonstration's condition. Call after demonstrationMismatch returned "".
+// demonstration's condition, and the exploration variance is the task's imitation_variance
+// (when set). Call after demonstrationMismatch returned "".
 void imitateDemonstration(const Demonstration& demo, const StateLayout& layout, const ObjectGeometry& geometry,
                           TrainingTask& task);
 

@@ -67,6 +67,10 @@ struct TrainingTask {
 
   // Initial controller: u = initial_command, covariance initial_variance * I (V^2).
   double initial_command = 0, initial_variance = 1.0;
+  // Learning from a demonstration (thesis 10.4): the first iteration samples around the
+  // demonstration's controls with "small random noise", this variance (V^2) instead of
+  // initial_variance, which is sized for exploring from scratch. 0 = initial_variance.
+  double imitation_variance = 0;
   double epsilon = 1.0;  // first KL step size (nats over the trajectory)
 
   // Success at T: joint RMS error over target_joints below success_joint_rms (rad); object

@@ -1,5 +1,6 @@
 #include "adroit_learning/network_distillation.h"
 
+#include <adroit_core/number_text.h>
 #include <adroit_core/normal_noise.h>
 #include <adroit_learning/tvlg_policy.h>
 
@@ -21,12 +22,6 @@ const double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 double secondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
-std::string formatNumber(double x) {
-  char text[40];
-  std::snprintf(text, sizeof text, "%.17g", x);
-  return text;
 }
 
 // splitmix64 of (seed, stream): independent seeds for the rounds from one user seed.
@@ -132,7 +127,7 @@ std::string libraryProblem(const PolicyLibrary& library, const TrainingTask& tas
     const std::string name = e.resolved_path.empty() ? e.path : e.resolved_path;
     if (!e.policy) return name + ": policy not read";
     if (!(std::isfinite(e.yaw_deg) && e.yaw_deg >= 0 && e.yaw_deg < 180))
-      return name + ": angle must be in [0, 180) degrees, got " + formatNumber(e.yaw_deg);
+      return name + ": angle must be in [0, 180) degrees, got " + exactNumber(e.yaw_deg);
     const std::string mismatch =
         TvlgPolicy(e.policy, name).mismatch(backend.jointNames(), backend.cylinderNames(), backend.touchNames(), layout);
     if (!mismatch.empty()) return mismatch;
@@ -142,11 +137,11 @@ std::string libraryProblem(const PolicyLibrary& library, const TrainingTask& tas
              std::to_string(c.horizon()) + ", the task needs nx " + std::to_string(layout.nx()) + ", nu " +
              std::to_string(layout.nu()) + " and T >= 1";
     if (e.policy->control_dt != task.control_dt)
-      return name + ": control_dt " + formatNumber(e.policy->control_dt) + " s, task '" + task.name + "' has " +
-             formatNumber(task.control_dt) + " s";
+      return name + ": control_dt " + exactNumber(e.policy->control_dt) + " s, task '" + task.name + "' has " +
+             exactNumber(task.control_dt) + " s";
     if (e.policy->locked_command != layout.locked_command)
-      return name + ": locked cylinders held at " + formatNumber(e.policy->locked_command) + " V, task '" + task.name +
-             "' holds them at " + formatNumber(layout.locked_command) + " V";
+      return name + ": locked cylinders held at " + exactNumber(e.policy->locked_command) + " V, task '" + task.name +
+             "' holds them at " + exactNumber(layout.locked_command) + " V";
   }
   return "";
 }

@@ -1,5 +1,6 @@
 #include "adroit_learning/network_policy.h"
 
+#include <adroit_core/number_text.h>
 #include <adroit_core/word_list.h>
 #include <adroit_learning/policy_loader.h>
 
@@ -363,12 +364,6 @@ void NetworkPolicy::parametersChanged() { model_->prepareInference(); }
 
 namespace {
 
-std::string formatDouble(double x) {
-  char buf[40];
-  std::snprintf(buf, sizeof buf, "%.17g", x);
-  return buf;
-}
-
 Eigen::MatrixXd column(const Eigen::VectorXf& v) { return v.cast<double>(); }
 
 // The header's `key value` lines up to the `matrices` line, and where the blocks after it start.
@@ -464,7 +459,7 @@ void writeNetworkPolicyFile(const std::string& path, const NetworkPolicy& policy
   out << kMagic << " " << kNetworkPolicyFormatVersion << "\n"
       << "task " << m.task << "\n"
       << "scene " << m.scene << "\n"
-      << "control_dt " << formatDouble(m.control_dt) << "\n"
+      << "control_dt " << exactNumber(m.control_dt) << "\n"
       << "observation " << name(m.observation) << "\n"
       << "hidden_layers " << policy.spec().hidden_layers << "\n"
       << "units " << policy.spec().units << "\n"

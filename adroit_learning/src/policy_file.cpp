@@ -1,5 +1,6 @@
 #include "adroit_learning/policy_file.h"
 
+#include <adroit_core/number_text.h>
 #include <adroit_core/word_list.h>
 #include <adroit_core/bounded_file.h>
 
@@ -19,12 +20,6 @@ namespace {
 
 constexpr const char* kMagic = "adroit_tvlg_policy";
 constexpr const char* kMatrices = "matrices";
-
-std::string formatDouble(double x) {
-  char buf[40];
-  std::snprintf(buf, sizeof(buf), "%.17g", x);
-  return buf;
-}
 
 // The first name where two lists differ, as "'a' where the robot has 'b'" (or a count).
 std::string firstDifference(const std::vector<std::string>& file, const std::vector<std::string>& robot) {
@@ -77,10 +72,10 @@ void writePolicyFile(const std::string& path, const PolicyFile& p) {
   out << kMagic << " " << kPolicyFormatVersion << "\n"
       << "task " << p.task << "\n"
       << "scene " << p.scene << "\n"
-      << "control_dt " << formatDouble(p.control_dt) << "\n"
+      << "control_dt " << exactNumber(p.control_dt) << "\n"
       << "iteration " << p.iteration << "\n"
-      << "cost_mean " << formatDouble(p.cost_mean) << "\n"
-      << "locked_command " << formatDouble(p.locked_command) << "\n"
+      << "cost_mean " << exactNumber(p.cost_mean) << "\n"
+      << "locked_command " << exactNumber(p.locked_command) << "\n"
       << "state_layout " << p.state_layout << "\n"
       << "joints" << joinWords(p.joints) << "\n"
       << "cylinders" << joinWords(p.cylinders) << "\n"

@@ -1,5 +1,6 @@
 #include "adroit_learning/policy_library.h"
 
+#include <adroit_core/number_text.h>
 #include <adroit_core/bounded_file.h>
 
 #include <algorithm>
@@ -19,22 +20,16 @@ constexpr const char* kMagic = "adroit_policy_library";
 // The state layout's block that holds the object's rotation vector (StateLayout::describe()).
 constexpr const char* kRotationBlock = "object_rotation_vector";
 
-std::string formatDouble(double x) {
-  char buf[40];
-  std::snprintf(buf, sizeof(buf), "%.17g", x);
-  return buf;
-}
-
 // "" when the yaws are usable as a library's keys, else why not.
 std::string yawsProblem(const std::vector<PolicyLibraryEntry>& entries) {
   if (entries.empty()) return "library has no policies";
   for (std::size_t i = 0; i < entries.size(); ++i) {
     const double yaw = entries[i].yaw_deg;
     if (!(std::isfinite(yaw) && yaw >= 0 && yaw < 180))
-      return "policy " + entries[i].path + ": angle must be in [0, 180) degrees, got " + formatDouble(yaw);
+      return "policy " + entries[i].path + ": angle must be in [0, 180) degrees, got " + exactNumber(yaw);
     for (std::size_t j = 0; j < i; ++j)
       if (entries[j].yaw_deg == yaw)
-        return "policies " + entries[j].path + " and " + entries[i].path + " have the same angle " + formatDouble(yaw);
+        return "policies " + entries[j].path + " and " + entries[i].path + " have the same angle " + exactNumber(yaw);
   }
   return "";
 }
@@ -67,8 +62,8 @@ std::string localPolicyProblem(const PolicyLibrary& library, const PolicyFile& f
   if (p.joints != first.joints || p.cylinders != first.cylinders || p.actions != first.actions)
     return name + ": other joints, cylinders or actions than the library's first policy";
   if (p.control_dt != first.control_dt)
-    return name + ": control_dt " + formatDouble(p.control_dt) + " s, the library's first policy has " +
-           formatDouble(first.control_dt) + " s";
+    return name + ": control_dt " + exactNumber(p.control_dt) + " s, the library's first policy has " +
+           exactNumber(first.control_dt) + " s";
   if (p.controller.horizon() != first.controller.horizon())
     return name + ": horizon " + std::to_string(p.controller.horizon()) + ", the library's first policy has " +
            std::to_string(first.controller.horizon());
@@ -177,7 +172,7 @@ void writePolicyLibrary(const std::string& path, const PolicyLibrary& library) {
   for (const auto& e : library.entries) {
     if (e.path.empty() || e.path.find('\n') != std::string::npos || std::isspace(static_cast<unsigned char>(e.path[0])))
       throw PolicyFileError(path + ": policy path '" + e.path + "' cannot be written on one line");
-    out << "policy " << formatDouble(e.yaw_deg) << " " << e.path << "\n";
+    out << "policy " << exactNumber(e.yaw_deg) << " " << e.path << "\n";
   }
   writeFileAtomically(path, out.str());
 }

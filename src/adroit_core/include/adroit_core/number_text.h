@@ -13,4 +13,12 @@ inline std::string shortNumber(double value) {
   return text;
 }
 
+// A number as a file keeps it: 17 significant digits ("%.17g"), which read back to the same
+// double (policy, library and network files).
+inline std::string exactNumber(double value) {
+  char text[40];
+  std::snprintf(text, sizeof text, "%.17g", value);
+  return text;
+}
+
 }  // namespace adroit

@@ -301,9 +301,9 @@ class TrainerNode {
           imitate(demonstrations[k], *backend, local, local_settings);
           if (count > 1) local_settings.output_dir = settings.output_dir + "/" + yawDirectory(*local.initial_object_yaw);
           if (!trainPolicy(local, local_settings, *backend, id, {k, count})) state = "cancelled";
-          library.entries.push_back({local.initial_object_yaw.value_or(0.0),
-                                     local_settings.output_dir.substr(settings.output_dir.size() + (count > 1 ? 1 : 0)) +
-                                         (count > 1 ? "/" : "") + "final.tvlg", nullptr, ""});
+          library.entries.push_back(
+              {local.initial_object_yaw.value_or(0.0), yawDirectory(local.initial_object_yaw.value_or(0.0)) + "/final.tvlg",
+               nullptr, ""});  // written only for several policies, each in its yaw directory
         }
         if (state != "cancelled") {
           state = "finished";

@@ -105,6 +105,26 @@ TEST(PickupEvalHelpers, NamesAssignmentsAndRequirements) {
   EXPECT_EQ(yawList({0, 12.5, 90}), "0 12.5 90");
 }
 
+// The ceiling counts a random trial once when any TVLG policy succeeds there, never a network's
+// or a library's success, and is undefined without TVLG policies.
+TEST(PickupEvalHelpers, LocalPolicyCeilingIsTheUnionOfTvlgSuccesses) {
+  auto policy = [](const std::string& kind, std::vector<bool> outcomes) {
+    Evaluated p;
+    p.kind = kind;
+    for (bool ok : outcomes) p.random.push_back(TrialResult{0.0, ok, kNaN, kNaN, ""});
+    return p;
+  };
+  std::vector<Evaluated> policies;
+  EXPECT_TRUE(std::isnan(localPolicyCeiling(policies)));
+  policies.push_back(policy("network", {true, true, true, true}));
+  policies.push_back(policy("library", {true, true, true, true}));
+  EXPECT_TRUE(std::isnan(localPolicyCeiling(policies)));
+  policies.push_back(policy("tvlg", {true, false, false, false}));
+  EXPECT_DOUBLE_EQ(localPolicyCeiling(policies), 25.0);
+  policies.push_back(policy("tvlg", {true, false, true, false}));  // overlaps at trial 0: counted once
+  EXPECT_DOUBLE_EQ(localPolicyCeiling(policies), 50.0);
+}
+
 TEST(PickupEvalHelpers, OptionRangesAreChecked) {
   Options o;
   o.policies = {{"a", "/x"}};

@@ -29,7 +29,10 @@
 //   RESULT adroit_learning/pickup_random_success/<name> <percent> % target >= <min> PASS|FAIL
 //     for the policies named in --require; the others' rates are INFO lines (no target);
 //   RESULT adroit_learning/pickup_inference_p99/<name> <ms> ms target <= 1 PASS|FAIL
-//     for network policies.
+//     for network policies;
+//   RESULT adroit_learning/pickup_local_policy_ceiling <percent> % target >= <highest MIN> PASS|FAIL
+//     with --require: the random yaws at which any TVLG policy (local or demonstration replay)
+//     succeeds, the bound on what nearest neighbour over them can reach.
 // Exit status: 0 (also when a target fails; 1 then with --strict); 2 for bad input (an option,
 // a policy file loadPolicy refuses, a policy of another task or robot, a demonstration that
 // cannot be replayed), which is one line on stderr before anything runs.
@@ -765,6 +768,36 @@ void printTable(const std::vector<Evaluated>& policies, const std::vector<Summar
               workers, std::thread::hardware_concurrency());
 }
 
+// The most any selection among the local policies can reach on the random yaws: the share of
+// trials at which at least one "tvlg" policy (a local policy or a demonstration replay) succeeds.
+// Nearest neighbour deploys one of them per trial, so it cannot exceed this; the networks learn
+// from their rollouts. NaN when the run has no such policy or no random trials.
+double localPolicyCeiling(const std::vector<Evaluated>& policies) {
+  std::size_t trials = 0;
+  for (const Evaluated& p : policies)
+    if (p.kind == "tvlg") trials = std::max(trials, p.random.size());
+  if (trials == 0) return kNaN;
+  int covered = 0;
+  for (std::size_t i = 0; i < trials; ++i)
+    covered += std::any_of(policies.begin(), policies.end(), [&](const Evaluated& p) {
+      return p.kind == "tvlg" && i < p.random.size() && p.random[i].success;
+    });
+  return 100.0 * covered / static_cast<double>(trials);
+}
+
+// The ceiling as the bound of the same run, against the highest --require rate (none without
+// --require); true when the ceiling leaves that rate within reach.
+bool printCeiling(const std::vector<Evaluated>& policies, const Options& o) {
+  const double ceiling = localPolicyCeiling(policies);
+  if (std::isnan(ceiling) || o.require.empty()) return true;
+  double highest = 0;
+  for (const auto& r : o.require) highest = std::max(highest, r.second);
+  std::printf("(bound: the random yaws at which any local policy or demonstration replay of this run succeeds; "
+              "nearest neighbour deploys one of them per yaw)\n");
+  std::printf("%s\n", adroit::resultLine("adroit_learning", "pickup_local_policy_ceiling", ceiling, "%", ">=", highest).c_str());
+  return ceiling >= highest;
+}
+
 // RESULT lines; true when every targeted figure passes.
 bool printResults(const std::vector<Evaluated>& policies, const std::vector<Summary>& sums, const Options& o) {
   bool all_pass = true;
@@ -787,7 +820,7 @@ bool printResults(const std::vector<Evaluated>& policies, const std::vector<Summ
     std::printf("%s\n", adroit::resultLine("adroit_learning", "pickup_inference_p99/" + policies[i].name, sums[i].p99_ms,
                                            "ms", "<=", kInferenceTargetMs).c_str());
   }
-  return all_pass;
+  return printCeiling(policies, o) && all_pass;
 }
 
 // Everything that can refuse the input, before any rollout.

@@ -75,6 +75,8 @@ TEST(PickupEvalHelpers, CsvFieldsQuoteOnlyWhatNeedsIt) {
   EXPECT_EQ(csvField("two\nlines"), "\"two\nlines\"");
   EXPECT_EQ(numberField(kNaN), "");
   EXPECT_EQ(numberField(12.5), "12.5");
+  // A yaw read back from a simulated state: rounding noise around 0 is 0, -0 is 0.
+  EXPECT_EQ(yawList({3.52933e-32, 18, 12.5, -0.0}), "0 18 12.5 0");
 }
 
 TEST(PickupEvalHelpers, NamesAssignmentsAndRequirements) {

@@ -179,10 +179,14 @@ std::string conditionLabel(std::size_t index) {
   return label;
 }
 
+// A yaw for tables and CSV: rounded to 1e-6 degrees, since a yaw read back
+// from a simulated state carries rounding noise (1e-32 for 0 would read as a real angle).
+std::string yawText(double yaw) { return adroit::shortNumber(std::round(yaw * 1e6) / 1e6 + 0.0); }
+
 // Yaws as one CSV-safe field: "0 12.5 90".
 std::string yawList(const std::vector<double>& yaws) {
   std::string out;
-  for (double y : yaws) out += (out.empty() ? "" : " ") + adroit::shortNumber(y);
+  for (double y : yaws) out += (out.empty() ? "" : " ") + yawText(y);
   return out;
 }
 
@@ -691,7 +695,7 @@ std::string crossValidationTable(const std::vector<Evaluated>& policies, const s
   std::ostringstream md;
   md << "| policy |";
   for (std::size_t c = 0; c < conditions.size(); ++c)
-    md << ' ' << conditionLabel(c) << " (" << adroit::shortNumber(conditions[c]) << " deg) |";
+    md << ' ' << conditionLabel(c) << " (" << yawText(conditions[c]) << " deg) |";
   md << " random |\n|---|";
   for (std::size_t c = 0; c <= conditions.size(); ++c) md << "---|";
   md << '\n';
@@ -715,7 +719,7 @@ void writeCrossValidation(const std::vector<Evaluated>& policies, const std::vec
     const Evaluated& p = policies[i];
     for (std::size_t c = 0; c < p.cross.size(); ++c) {
       const int n = static_cast<int>(p.cross[c].size()), ok = successes(p.cross[c]);
-      csv << csvField(p.name) << ',' << conditionLabel(c) << ',' << adroit::shortNumber(conditions[c]) << ',' << n << ','
+      csv << csvField(p.name) << ',' << conditionLabel(c) << ',' << yawText(conditions[c]) << ',' << n << ','
           << ok << ',' << percent(ok, n) << '\n';
     }
     csv << csvField(p.name) << ",random,," << sums[i].random_n << ',' << sums[i].random_ok << ','

@@ -122,6 +122,11 @@ void ForceTrackingAudit::setMinTension(double newtons) {
   min_tension_ = newtons;
 }
 
+void ForceTrackingAudit::setSensor(const SensorParams& params, std::uint64_t seed) {
+  floor_sensor_ = std::make_unique<SensorModel>(cylinders_.size(), params, seed);
+  tick_sensor_ = std::make_unique<SensorModel>(cylinders_.size(), params, seed + 1);
+}
+
 void ForceTrackingAudit::start(const std::vector<double>& pressure) {
   for (std::size_t j = 0; j < cylinders_.size(); ++j) {
     const double p = j < pressure.size() && std::isfinite(pressure[j]) ? pressure[j] : room_;
@@ -136,18 +141,32 @@ void ForceTrackingAudit::add(double dt, const std::vector<double>& reference, co
                              double supply) {
   const std::size_t n = std::min({cylinders_.size(), reference.size(), tension.size(), volume.size(),
                                   volume_rate.size()});
-  last_tick_tension_.assign(cylinders_.size(), std::nan(""));
-  given_.resize(cylinders_.size(), std::nan(""));
+  const std::size_t all = cylinders_.size();
+  last_tick_tension_.assign(all, std::nan(""));
+  given_.resize(all, std::nan(""));
+  // Causal: a controller learns of this sample's reference now, so over the interval that
+  // ends now the floors act on the one given at the previous sample (a reference that
+  // changes at this sample is met at the next one at the earliest, as by the robot).
+  floor_pressure_.resize(all);
+  tick_pressure_.resize(all);
+  for (std::size_t j = 0; j < all; ++j) {
+    const bool usable = j < n && std::isfinite(reference[j]) && std::isfinite(tension[j]);
+    floor_pressure_[j] = usable ? floors_[j].step(given_[j], dt, volume[j], volume_rate[j], supply) : floors_[j].pressure();
+    tick_pressure_[j] = usable ? ticks_[j].step(given_[j], dt, volume[j], volume_rate[j], supply) : ticks_[j].pressure();
+  }
+  if (floor_sensor_) {  // the floors seen through the measurement's sensor
+    no_length_.assign(all, 0.0);
+    floor_sensor_->update(dt, floor_pressure_, no_length_);
+    tick_sensor_->update(dt, tick_pressure_, no_length_);
+  }
+  const std::vector<double>& floor_seen = floor_sensor_ ? floor_sensor_->pressure() : floor_pressure_;
+  const std::vector<double>& tick_seen = tick_sensor_ ? tick_sensor_->pressure() : tick_pressure_;
   for (std::size_t j = 0; j < n; ++j) {
     if (!std::isfinite(reference[j]) || !std::isfinite(tension[j])) continue;
     const double area = cylinders_[j].spec.bore_area, want = std::max(0.0, reference[j]);
     // Tension is pull only: a chamber below the room pressure pulls nothing (or the minimum).
     const auto pull = [&](double p) { return std::max(min_tension_, (p - room_) * area); };
-    // Causal: a controller learns of this sample's reference now, so over the interval that
-    // ends now the floors act on the one given at the previous sample (a reference that
-    // changes at this sample is met at the next one at the earliest, as by the robot).
-    const double floor = pull(floors_[j].step(given_[j], dt, volume[j], volume_rate[j], supply));
-    const double tick = pull(ticks_[j].step(given_[j], dt, volume[j], volume_rate[j], supply));
+    const double floor = pull(floor_seen[j]), tick = pull(tick_seen[j]);
     given_[j] = room_ + want / area;
     last_tick_tension_[j] = tick;
     Sums& s = sums_[cylinders_[j].group];

@@ -136,6 +136,28 @@ TEST(ForceTrackingAudit, AReferenceBelowTheRobotsMinimumTensionCountsAgainstTheF
   EXPECT_THROW(audit.setMinTension(std::nan("")), std::invalid_argument);
 }
 
+// Seen through the measurement's sensor, a floor holding a constant tension carries the
+// sensor's noise (2 kPa on the pressure: about 2 kPa x bore area on the tension), as the
+// measured tension does; the exact floor has none once it has settled.
+TEST(ForceTrackingAudit, ASensedFloorCarriesTheSensorsNoise) {
+  const CylinderSpec spec = cylinderSpec("M9");
+  const double v = spec.dead_volume + 0.5 * spec.bore_area * spec.stroke;
+  const auto settled_floor = [&](bool sensed) {
+    ForceTrackingAudit audit({{"FF", spec}}, kLimit, 0.002);
+    SensorParams sensor;
+    sensor.pressure_quantum = 1.0;  // noise only: the quantum's own error is far smaller anyway
+    if (sensed) audit.setSensor(sensor);
+    audit.start({constants::kAtmosphere + 10.0 / spec.bore_area});
+    for (int k = 0; k < 400; ++k) audit.add(kDt, {10.0}, {10.0}, {v}, {0}, 620e3);
+    return audit.groups().at("FF").floor;
+  };
+  const double exact = settled_floor(false), sensed = settled_floor(true);
+  const double noise = SensorParams{}.pressure_noise_std * spec.bore_area;  // N
+  EXPECT_LT(exact, 0.01 * noise);
+  EXPECT_GT(sensed, 0.5 * noise);  // the low-pass at 500 Hz barely thins 5 ms samples
+  EXPECT_LT(sensed, 1.5 * noise);
+}
+
 // The floors learn of a sample's reference at that sample: a jump counts in full where it
 // is given, and the chamber moves towards it only from then on.
 TEST(ForceTrackingAudit, AJumpCountsInFullAtTheSampleItIsGiven) {

@@ -4,10 +4,12 @@
 #pragma once
 
 #include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "adroit_pneumatics/plant.h"
+#include "adroit_pneumatics/sensor_model.h"
 
 namespace adroit::pneumatics {
 
@@ -81,6 +83,12 @@ class ForceTrackingAudit {
   // ~min_tension; 0 for a sensor that reads what the pressure pulls): the floors' tensions
   // are at least this too, so a reference below it counts against both alike. >= 0.
   void setMinTension(double newtons);
+  // The floors read through the sensor the measured tension comes from: their chamber
+  // pressures pass the same noise, quantisation and low-pass (SensorModel at each sample)
+  // before they become tensions, so the floors carry the sensor's error as the measurement
+  // does (its delay is the dead time above). Without it the floors see the exact chamber.
+  // Call before start(); `seed` starts the noise (the floors' noise is not the run's).
+  void setSensor(const SensorParams& params, std::uint64_t seed = 11);
   // Starts the floors at these pressures (Pa) for a new run; the sums go on.
   void start(const std::vector<double>& pressure);
   // One sample dt after the previous one: per cylinder the reference and measured tension
@@ -101,6 +109,8 @@ class ForceTrackingAudit {
   std::vector<TrackingFloor> floors_, ticks_;
   std::vector<double> last_tick_tension_;
   std::vector<double> given_;  // Pa, each cylinder's reference at the previous sample (NaN: none yet)
+  std::unique_ptr<SensorModel> floor_sensor_, tick_sensor_;  // null: the exact chambers
+  std::vector<double> floor_pressure_, tick_pressure_, no_length_;
   std::map<std::string, Sums> sums_;
 };
 

@@ -30,14 +30,15 @@ struct AuditRun {
   std::string out;
 };
 
-AuditRun audit(const std::string& bag) {
+AuditRun audit(const std::string& bag, const std::vector<std::string>& extra = {}) {
   adroit::ProgramOptions options;
   options.timeout_s = 60;
   options.capture_output = true;
   options.merge_stderr = true;
-  const auto run = adroit::runProgram(
-      {FORCE_AUDIT_BINARY, "--bag", bag, "--model", adroit::description::sceneFile(ADROIT_DESCRIPTION_SHARE, "arm_hand")},
-      options);
+  std::vector<std::string> args = {FORCE_AUDIT_BINARY, "--bag", bag, "--model",
+                                   adroit::description::sceneFile(ADROIT_DESCRIPTION_SHARE, "arm_hand")};
+  args.insert(args.end(), extra.begin(), extra.end());
+  const auto run = adroit::runProgram(args, options);
   AuditRun r;
   r.out = run.output;
   r.status = run.exit_code;
@@ -130,6 +131,14 @@ TEST(ForceAuditBag, ReportsTheErrorInTheBag) {
       << b.out;
   EXPECT_NE(b.out.find("bound: the plant's floor on this run"), std::string::npos) << b.out;
   EXPECT_NE(a.out.find("0.00 / 0.00 / 0.00"), std::string::npos) << a.out;
+  // The ramps rise 10 N/s: 0.1 N from one 10 ms knot to the next; the ratio to the floor read
+  // through the sensor is a RESULT of its own.
+  EXPECT_NE(a.out.find("the plans' largest tension step per knot 0.1 N; the floor read through the sensor"),
+            std::string::npos) << a.out;
+  EXPECT_NE(b.out.find("RESULT adroit_pneumatics/demo_force_floor_ratio_FF "), std::string::npos) << b.out;
+  const AuditRun exact_floor = audit(off, {"--floor-sensor", "none"});
+  EXPECT_EQ(exact_floor.status, 0) << exact_floor.out;
+  EXPECT_NE(exact_floor.out.find("the floor exact"), std::string::npos) << exact_floor.out;
 }
 
 TEST(ForceAuditBag, BadInputIsAClearError) {
@@ -142,6 +151,10 @@ TEST(ForceAuditBag, BadInputIsAClearError) {
   const AuditRun b = audit(bad);  // the malformed reference is counted and skipped, the good one used
   EXPECT_EQ(b.status, 0) << b.out;
   EXPECT_NE(b.out.find("(1 unusable)"), std::string::npos) << b.out;
+  const AuditRun sensor = audit(bad, {"--floor-sensor", "noisy"});
+  EXPECT_EQ(sensor.status, 2) << sensor.out;
+  EXPECT_NE(sensor.out.find("force_tracking_audit: --floor-sensor must be sim or none (got 'noisy')"), std::string::npos)
+      << sensor.out;
   const AuditRun c = audit(tempBag("no_such.bag"));
   EXPECT_EQ(c.status, 1) << c.out;
   EXPECT_NE(c.out.find("force_tracking_audit: "), std::string::npos) << c.out;

@@ -1,36 +1,43 @@
 // Behaviour MPC timing on the bottle catch scene (thesis table 6.2) and contact pruning
 // (thesis 6.4.3). A program, not a test: run it on an idle machine.
 //
-//   mpc_timing [--iterations N] [--quick]
+//   mpc_timing [--iterations N] [--dt S] [--skip K] [--quick] [--compare-only]
+//              [--planners ilqg,sampling,cem] [--tasks catch,relocate,type]
+//              [--samples N] [--cem-elites N] [--cem-std-initial S] [--cem-std-min S]
 //
 // 1. Cost of one step and of one finite-difference knot on the planning model, sensors on/off;
 //    grouped finite differences (separated trees nudged together) against mjd_transitionFD.
 // 2. iLQG (and predictive sampling in the same run) in closed loop on the bottle drop:
 //    the simulation (bottle.xml, 2 ms) runs the policy for one control period between two
 //    optimisations; per-phase time split, median and p90.
+// 2b. The planners side by side on every task (its scene and its YAML's planner hints):
+//    wall and CPU time per iteration, CPU against iLQG's (--compare-only: this table alone).
+//    --samples and the --cem-* flags set the sampling planners' settings for it.
 // 3. Design choices: iLQG total for planner dt, derivative_skip and worker count.
 // 4. Active contacts per step, before and after pruning, over a falling-bottle rollout.
 // 5. What a cheaper planning model (fixed tendons with constant moment arms instead of the
 //    wrapped spatial tendons) would give: step and FD time, built in memory from the XML.
 // Ends with RESULT lines (DESIGN.md §5).
+#include <adroit_core/command_line.h>
 #include <adroit_core/mujoco_model.h>
 #include <adroit_core/model_tables.h>
 #include <adroit_core/timing_stats.h>
+#include <adroit_core/word_list.h>
 #include <adroit_description/scenes.h>
 #include <adroit_mpc/fd_derivatives.h>
-#include <adroit_mpc/ilqg_planner.h>
+#include <adroit_mpc/planner.h>
 #include <adroit_mpc/planning_model.h>
-#include <adroit_mpc/sampling_planner.h>
 #include <adroit_mpc/task.h>
 #include <adroit_mpc/task_params.h>
 
+#include <algorithm>
 #include <array>
 
 #include <cstdio>
 #include <cstdlib>
-#include <cstring>
 #include <ctime>
 #include <fstream>
+#include <map>
 #include <regex>
 #include <sstream>
 #include <string>
@@ -74,20 +81,73 @@ struct Scene {
   std::string share, planning_file, sim_file;
 };
 
+// A task's closed loop: its scene, the planning model's contact settings as the node sets
+// them (typing: 1 mm), the object dropped from its start, a goal or a sequence midway.
+struct TaskSetup {
+  std::string task, planning_file, sim_file;
+  double contact = -1;  // planning model's contact margin and softness (-1: keep)
+};
+
+TaskSetup taskSetup(const std::string& share, const std::string& task) {
+  const std::string scene = paramString(task, defaultTaskParams(task), "scene");
+  return {task, adroit::description::sceneFile(share, scene, true), adroit::description::sceneFile(share, scene, false),
+          task == "type" ? 0.001 : -1};
+}
+
+// `base` with the planner hints of the task's YAML (horizon, knot spacing, derivative skip).
+PlannerSettings taskSettings(const std::string& task, PlannerSettings base) {
+  const TaskParams d = defaultTaskParams(task);
+  base.horizon = paramNumber(task, d, "horizon", 0.01, 5);
+  base.dt = paramNumber(task, d, "planner_dt", 1e-4, 0.1);
+  if (d.numbers.count("derivative_skip"))
+    base.derivative_skip = static_cast<int>(paramNumber(task, d, "derivative_skip", 1, 100));
+  return base;
+}
+
+// The simulation at the rest keyframe with the task's object at its start, at rest.
+void startTrial(const std::string& task, const mjModel* m, mjData* d) {
+  const int rest = mj_name2id(m, mjOBJ_KEY, "rest");
+  if (rest >= 0) mj_resetDataKeyframe(m, d, rest);
+  const TaskParams p = defaultTaskParams(task);
+  const int object = mj_name2id(m, mjOBJ_BODY, "object");
+  if (object >= 0 && m->body_jntnum[object] == 1 && p.vectors.count("object_start_position")) {
+    const int joint = m->body_jntadr[object];
+    const Eigen::Vector3d start = paramVector3(task, p, "object_start_position");
+    double* q = d->qpos + m->jnt_qposadr[joint];
+    for (int i = 0; i < 3; ++i) q[i] = start[i];
+    q[3] = 1, q[4] = q[5] = q[6] = 0;
+    mju_zero(d->qvel + m->jnt_dofadr[joint], 6);
+  }
+  mj_forward(m, d);
+}
+
+// Midway through the loop: relocation gets a goal 5 cm beside the hold, typing its keys.
+void giveTaskWork(Task& task) {
+  std::string why;
+  if (task.name() == "relocate") {
+    const Eigen::Vector3d hold = paramVector3("relocate", defaultTaskParams("relocate"), "hold_position");
+    if (!task.setGoal(hold + Eigen::Vector3d(0.05, 0, 0), Eigen::Quaterniond::Identity(), &why))
+      throw std::runtime_error("relocate goal: " + why);
+  }
+  if (task.name() == "type" && !task.setSequence("1234567890", &why)) throw std::runtime_error("type: " + why);
+}
+
 // Closed loop: plan from the simulation's state, run the policy for `period`, repeat.
-RunResult runClosedLoop(const Scene& scene, const std::string& planner_name, PlannerSettings settings,
+RunResult runClosedLoop(const TaskSetup& setup, const std::string& planner_name, PlannerSettings settings,
                         bool disable_sensors, int iterations, double period) {
   PlanningModelSettings ms_settings;
   ms_settings.timestep = settings.dt;
   ms_settings.disable_sensors = disable_sensors;
-  auto model = loadPlanningModel(scene.planning_file, ms_settings);
-  auto sim_model = adroit::loadModelFile(scene.sim_file).model;
+  if (setup.contact >= 0) ms_settings.contact_margin = ms_settings.contact_softness = setup.contact;
+  auto model = loadPlanningModel(setup.planning_file, ms_settings);
+  auto sim_model = adroit::loadModelFile(setup.sim_file).model;
+  if (sim_model->nq != model->nq || sim_model->nv != model->nv || sim_model->na != model->na)
+    throw std::runtime_error(setup.sim_file + ": state sizes differ from the planning model's");
   adroit::DataPtr sim = adroit::makeData(sim_model.get());
-  const int rest = mj_name2id(sim_model.get(), mjOBJ_KEY, "rest");
-  if (rest >= 0) mj_resetDataKeyframe(sim_model.get(), sim.get(), rest);
-  mj_forward(sim_model.get(), sim.get());
+  adroit::DataPtr observed = adroit::makeData(model.get());  // the task observes on the planning model
+  startTrial(setup.task, sim_model.get(), sim.get());
 
-  auto task = makeTask("catch", {});
+  auto task = makeTask(setup.task, {});
   task->bind(model.get(), settings.synergies ? Synergies::kCount : 0);  // for error() on the simulation
   auto planner = makePlanner(planner_name);
   planner->initialize(model.get(), *task, settings);
@@ -102,6 +162,14 @@ RunResult runClosedLoop(const Scene& scene, const std::string& planner_name, Pla
     state.qpos.assign(sim->qpos, sim->qpos + sim_model->nq);
     state.qvel.assign(sim->qvel, sim->qvel + sim_model->nv);
     state.act.assign(sim->act, sim->act + sim_model->na);
+    if (i == iterations / 2) giveTaskWork(*task);
+    mju_copy(observed->qpos, sim->qpos, model->nq);
+    mju_copy(observed->qvel, sim->qvel, model->nv);
+    if (model->na) mju_copy(observed->act, sim->act, model->na);
+    observed->time = sim->time;
+    mj_forward(model.get(), observed.get());
+    task->observe(model.get(), observed.get(), sim->time);
+    planner->setTask(*task);
     planner->setState(state);
     const double cpu_start = processCpuSeconds();
     OptimizeReport r = planner->optimize();
@@ -193,30 +261,89 @@ std::string fixedTendonXml(const std::string& xml, const mjModel* m) {
   return built.str();
 }
 
+// "a,b,c" -> {a, b, c}.
+std::vector<std::string> commaList(std::string text) {
+  std::replace(text.begin(), text.end(), ',', ' ');
+  return adroit::splitWords(text);
+}
+
+struct Comparison {
+  std::vector<std::string> planners{"ilqg", "sampling", "cem"}, tasks{"catch", "relocate", "type"};
+  PlannerSettings base;  // samples and the CEM settings; the tasks' hints go on top
+  int iterations = 50;
+};
+
+// 2b. Every planner on every task with the task's planner hints. Returns the median wall
+// time per iteration by "task/planner", ms.
+std::map<std::string, double> comparePlanners(const std::string& share, const Comparison& c, double period) {
+  std::printf("\nPlanners per task (%d iterations each, control period %.0f ms; sampling planners: %d samples, "
+              "CEM %d elites, std %.3g down to %.3g of the range)\n", c.iterations, 1e3 * period, c.base.samples,
+              c.base.cem_elites, c.base.cem_std_initial, c.base.cem_std_min);
+  std::printf("%-9s %-9s %6s %7s %10s %10s %10s %9s %9s %10s\n", "task", "planner", "dt", "knots", "median", "p90",
+              "CPU med.", "CPU/iLQG", "diverged", "final err");
+  std::map<std::string, double> medians;
+  for (const std::string& task : c.tasks) {
+    const TaskSetup setup = taskSetup(share, task);
+    const PlannerSettings settings = taskSettings(task, c.base);
+    double ilqg_cpu = 0;
+    for (const std::string& planner : c.planners) {
+      RunResult r = runClosedLoop(setup, planner, settings, true, c.iterations, period);
+      const double cpu = ms(r.series.cpu, 50);
+      if (planner == "ilqg") ilqg_cpu = cpu;
+      medians[task + "/" + planner] = ms(r.series.total, 50);
+      char ratio[16] = "-";
+      if (ilqg_cpu > 0) std::snprintf(ratio, sizeof ratio, "%.2f", cpu / ilqg_cpu);
+      std::printf("%-9s %-9s %6.3f %7ld %10.2f %10.2f %10.2f %9s %9d %10.4f\n", task.c_str(), planner.c_str(),
+                  settings.dt, std::lround(settings.horizon / settings.dt), ms(r.series.total, 50),
+                  ms(r.series.total, 90), cpu, ratio, r.diverged, r.final_error);
+    }
+  }
+  return medians;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   int iterations = 50;
-  bool quick = false;
+  bool quick = false, compare_only = false;
   // Defaults as shipped: the catch task's planner_dt (config/tasks/catch.yaml) and
   // derivative_skip of config/mpc.yaml.
   double dt = paramNumber("catch", defaultTaskParams("catch"), "planner_dt", 1e-4, 0.1);
   int skip = PlannerSettings().derivative_skip;
-  for (int i = 1; i < argc; ++i) {
-    if (!std::strcmp(argv[i], "--iterations") && i + 1 < argc) iterations = std::atoi(argv[++i]);
-    else if (!std::strcmp(argv[i], "--dt") && i + 1 < argc) dt = std::atof(argv[++i]);
-    else if (!std::strcmp(argv[i], "--skip") && i + 1 < argc) skip = std::atoi(argv[++i]);
-    else if (!std::strcmp(argv[i], "--quick")) quick = true;
-    else {
-      std::fprintf(stderr, "usage: mpc_timing [--iterations N] [--dt S] [--skip K] [--quick]\n");
-      return 2;
-    }
+  Comparison comparison;
+  adroit::CommandLine args(argc, argv,
+                           "usage: mpc_timing [--iterations N] [--dt S] [--skip K] [--quick] [--compare-only] "
+                           "[--planners ilqg,sampling,cem] [--tasks catch,relocate,type] [--samples N] "
+                           "[--cem-elites N] [--cem-std-initial S] [--cem-std-min S]");
+  while (args.next()) {
+    if (args.is("--iterations")) iterations = static_cast<int>(args.integer());
+    else if (args.is("--dt")) dt = args.number();
+    else if (args.is("--skip")) skip = static_cast<int>(args.integer());
+    else if (args.is("--quick")) quick = true;
+    else if (args.is("--compare-only")) compare_only = true;
+    else if (args.is("--planners")) comparison.planners = commaList(args.text());
+    else if (args.is("--tasks")) comparison.tasks = commaList(args.text());
+    else if (args.is("--samples")) comparison.base.samples = static_cast<int>(args.integer());
+    else if (args.is("--cem-elites")) comparison.base.cem_elites = static_cast<int>(args.integer());
+    else if (args.is("--cem-std-initial")) comparison.base.cem_std_initial = args.number();
+    else if (args.is("--cem-std-min")) comparison.base.cem_std_min = args.number();
+    else args.unknown();
   }
+  comparison.iterations = iterations;
   try {
+    if (compare_only) {
+      double load[1] = {0};
+      if (getloadavg(load, 1) < 1) load[0] = -1;
+      std::printf("MPC planners per task, %u cores, load average %.1f\n",
+                  std::max(1u, std::thread::hardware_concurrency()), load[0]);
+      comparePlanners(descriptionShareDir(), comparison, 0.02);
+      return 0;
+    }
     Scene scene;
     scene.share = descriptionShareDir();
     scene.planning_file = adroit::description::sceneFile(scene.share, "bottle", true);
     scene.sim_file = adroit::description::sceneFile(scene.share, "bottle", false);
+    const TaskSetup catch_setup = taskSetup(scene.share, "catch");
     const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
     double load[1] = {0};
     if (getloadavg(load, 1) < 1) load[0] = -1;
@@ -379,8 +506,8 @@ int main(int argc, char** argv) {
     const double period = 0.02;
     std::printf("\niLQG closed loop (%d iterations, control period %.0f ms, dt %.3f, skip %d, synergies)\n",
                 iterations, 1e3 * period, chosen.dt, chosen.derivative_skip);
-    RunResult ilqg = runClosedLoop(scene, "ilqg", chosen, true, iterations, period);
-    RunResult sampling = runClosedLoop(scene, "sampling", chosen, true, iterations, period);
+    RunResult ilqg = runClosedLoop(catch_setup, "ilqg", chosen, true, iterations, period);
+    RunResult sampling = runClosedLoop(catch_setup, "sampling", chosen, true, iterations, period);
     std::printf("%-22s %10s %10s   %s\n", "phase [ms]", "median", "p90", "thesis table 6.2 (6 cores)");
     const Series& s = ilqg.series;
     std::printf("%-22s %10.2f %10.2f   %s\n", "rollout", ms(s.rollout, 50), ms(s.rollout, 90), "6");
@@ -396,6 +523,9 @@ int main(int argc, char** argv) {
     std::printf("diverged iterations: iLQG %d, sampling %d; object distance to goal at the end: iLQG %.3f m, "
                 "sampling %.3f m\n", ilqg.diverged, sampling.diverged, ilqg.final_error, sampling.final_error);
 
+    // 2b. The planners side by side on every task.
+    const std::map<std::string, double> per_task = comparePlanners(scene.share, comparison, period);
+
     // 3. Design choices.
     if (!quick) {
       std::printf("\niLQG total per iteration by setting (median / p90 ms, 15 iterations each)\n");
@@ -409,7 +539,7 @@ int main(int argc, char** argv) {
         p.dt = c.dt;
         p.derivative_skip = c.skip;
         p.threads = c.threads;
-        RunResult r = runClosedLoop(scene, "ilqg", p, c.sensors_off, 16, period);
+        RunResult r = runClosedLoop(catch_setup, "ilqg", p, c.sensors_off, 16, period);
         std::printf("%-8.3f %-6d %-8d %-9s %10.2f %10.2f %10.2f\n", c.dt, c.skip,
                     c.threads ? c.threads : static_cast<int>(cores), c.sensors_off ? "off" : "on",
                     ms(r.series.total, 50), ms(r.series.total, 90), ms(r.series.cpu, 50));
@@ -435,6 +565,10 @@ int main(int argc, char** argv) {
     std::printf("\nRESULT adroit_mpc/ilqg_iteration_ms %.1f ms target <= 50 %s\n", median, median <= 50 ? "PASS" : "FAIL");
     std::printf("RESULT adroit_mpc/sampling_iteration_ms %.1f ms target <= 50 %s\n", ms(sampling.series.total, 50),
                 ms(sampling.series.total, 50) <= 50 ? "PASS" : "FAIL");
+    if (per_task.count("catch/cem")) {
+      const double cem = per_task.at("catch/cem");
+      std::printf("RESULT adroit_mpc/cem_iteration_ms %.1f ms target <= 50 %s\n", cem, cem <= 50 ? "PASS" : "FAIL");
+    }
     std::printf("RESULT adroit_mpc/active_contacts_pruned_ratio %.2f ratio target <= 0.7 %s\n",
                 mean_pruned / mean_unpruned, mean_pruned / mean_unpruned <= 0.7 ? "PASS" : "FAIL");
   } catch (const std::exception& e) {

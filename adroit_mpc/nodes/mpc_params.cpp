@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <set>
+#include <stdexcept>
 
 #include "mpc_ros.h"
 
@@ -67,6 +68,7 @@ MpcParams readParams(const ros::NodeHandle& pnh) {
   const rosutil::Params p(pnh);
   std::set<std::string> keys = {"scene", "model_file", "task", "tasks", "planner", "mode", "threads", "horizon", "dt",
                                  "iterations", "synergies", "derivative_skip", "samples", "noise_scale",
+                                 "cem_elites", "cem_std_initial", "cem_std_min",
                                  "control_rate", "state_timeout", "feedback_scale", "marker_rate",
                                  "diagnostics_period", "nice", "control_priority", "lockstep", "physics_timestep", "lockstep_controls_per_plan",
                                  "min_tension", "latency_compensation", "fd_warmstart"};
@@ -81,8 +83,11 @@ MpcParams readParams(const ros::NodeHandle& pnh) {
   out.model_file = p.modelPath(out.scene, true);
 
   out.planner = p.string("planner", "ilqg");
-  if (out.planner != "ilqg" && out.planner != "sampling")
-    p.fail("planner", "must be 'ilqg' or 'sampling', got '" + out.planner + "'");
+  try {
+    adroit_mpc::makePlanner(out.planner);  // the core's names, in its one-line refusal
+  } catch (const std::invalid_argument& e) {
+    p.fail("planner", e.what());
+  }
   const std::string mode = p.string("mode", "force");
   if (mode != "force" && mode != "pneumatic") p.fail("mode", "must be 'force' or 'pneumatic', got '" + mode + "'");
   out.force_mode = mode == "force";
@@ -106,6 +111,9 @@ MpcParams readParams(const ros::NodeHandle& pnh) {
   s.fd_warmstart = p.boolean("fd_warmstart", s.fd_warmstart);
   s.samples = p.integer("samples", s.samples, 1, 4096);
   s.noise_scale = p.number("noise_scale", s.noise_scale, 0.0, 10.0);
+  s.cem_elites = p.integer("cem_elites", s.cem_elites, 1, s.samples);
+  s.cem_std_initial = p.number("cem_std_initial", s.cem_std_initial, 1e-4, 10.0);
+  s.cem_std_min = p.number("cem_std_min", s.cem_std_min, 1e-4, s.cem_std_initial);
   out.feedback_scale = p.number("feedback_scale", hint("feedback_scale", out.feedback_scale), 0.0, 1.0);
   s.feedback_scale = out.feedback_scale;
   out.latency_compensation = p.boolean("latency_compensation", hint("latency_compensation", 0.0) > 0.5);

@@ -1,5 +1,6 @@
 #include "adroit_mpc/planner.h"
 
+#include "adroit_mpc/cem_planner.h"
 #include "adroit_mpc/ilqg_planner.h"
 #include "adroit_mpc/sampling_planner.h"
 
@@ -75,6 +76,13 @@ int validatePlannerSettings(const mjModel* m, const PlannerSettings& s) {
   if (s.samples < 1) bad("samples must be >= 1");
   if (!(s.noise_scale >= 0)) bad("noise_scale must be >= 0");
   if (s.spline_points < 1) bad("spline_points must be >= 1");
+  if (s.cem_elites < 1 || s.cem_elites > s.samples)
+    bad("cem_elites must be in [1, samples = " + std::to_string(s.samples) + "], got " + std::to_string(s.cem_elites));
+  if (!(s.cem_std_initial > 0) || !std::isfinite(s.cem_std_initial))
+    bad("cem_std_initial must be positive and finite, got " + std::to_string(s.cem_std_initial));
+  if (!(s.cem_std_min > 0) || !(s.cem_std_min <= s.cem_std_initial))
+    bad("cem_std_min must be positive and <= cem_std_initial (" + std::to_string(s.cem_std_initial) + "), got " +
+        std::to_string(s.cem_std_min));
   return knots;
 }
 
@@ -239,7 +247,8 @@ void integrateAfterForward(const mjModel* m, mjData* d) {
 std::unique_ptr<Planner> makePlanner(const std::string& name) {
   if (name == "ilqg") return std::make_unique<IlqgPlanner>();
   if (name == "sampling") return std::make_unique<SamplingPlanner>();
-  throw std::invalid_argument("unknown planner '" + name + "' (known: ilqg, sampling)");
+  if (name == "cem") return std::make_unique<CemPlanner>();
+  throw std::invalid_argument("unknown planner '" + name + "' (known: ilqg, sampling, cem)");
 }
 
 }  // namespace adroit_mpc

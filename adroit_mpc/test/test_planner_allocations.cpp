@@ -1,7 +1,10 @@
 // No heap allocation in optimize() after the first call, nor in PlanPolicy::action or in
-// copying the policy out (same sizes): counted by replacing the global operator new, on
-// the real hand planning model with synergies.
+// copying the policy out (same sizes), on the real hand planning model with synergies.
+// Counted by replacing malloc, calloc and realloc (Eigen allocates through malloc, which a
+// count of operator new alone missed) and the global operator new. AddressSanitizer owns
+// malloc: under it only operator new is counted.
 #include <adroit_description/scenes.h>
+#include <adroit_mpc/cem_planner.h>
 #include <adroit_mpc/ilqg_planner.h>
 #include <adroit_mpc/planning_model.h>
 #include <adroit_mpc/sampling_planner.h>
@@ -13,20 +16,41 @@
 
 static std::atomic<bool> counting{false};
 static std::atomic<long> allocations{0};
+
+#if !defined(__SANITIZE_ADDRESS__)
+extern "C" {
+void* __libc_malloc(std::size_t);
+void* __libc_calloc(std::size_t, std::size_t);
+void* __libc_realloc(void*, std::size_t);
+void* malloc(std::size_t size) {
+  if (counting) allocations++;
+  return __libc_malloc(size);
+}
+void* calloc(std::size_t n, std::size_t size) {
+  if (counting) allocations++;
+  return __libc_calloc(n, size);
+}
+void* realloc(void* p, std::size_t size) {
+  if (counting) allocations++;
+  return __libc_realloc(p, size);
+}
+}
+static constexpr bool kMallocCounted = true;
+#else
+static constexpr bool kMallocCounted = false;
+#endif
+
 void* operator new(std::size_t size) {
-  if (counting) allocations++;
+  if (counting && !kMallocCounted) allocations++;
   if (void* p = std::malloc(size ? size : 1)) return p;
   throw std::bad_alloc();
 }
-void* operator new[](std::size_t size) {
-  if (counting) allocations++;
-  if (void* p = std::malloc(size ? size : 1)) return p;
-  throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+void* operator new[](std::size_t size) { return operator new(size); }
+// Not inlined: GCC would then see malloc's memory freed through a "delete" and warn.
+[[gnu::noinline]] void operator delete(void* p) noexcept { std::free(p); }
+[[gnu::noinline]] void operator delete[](void* p) noexcept { std::free(p); }
+[[gnu::noinline]] void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+[[gnu::noinline]] void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
 
 using namespace adroit_mpc;
 
@@ -85,6 +109,7 @@ void checkNoAllocation(Planner& planner) {
   s.synergies = true;
   s.derivative_skip = 2;
   s.samples = 6;
+  s.cem_elites = 3;
   PoseTask task;
   planner.initialize(m.get(), task, s);
   PlannerState state;
@@ -121,5 +146,10 @@ TEST(PlannerAllocations, IlqgOptimizeAndActionAllocateNothing) {
 
 TEST(PlannerAllocations, SamplingOptimizeAndActionAllocateNothing) {
   SamplingPlanner planner;
+  checkNoAllocation(planner);
+}
+
+TEST(PlannerAllocations, CemOptimizeAndActionAllocateNothing) {
+  CemPlanner planner;
   checkNoAllocation(planner);
 }

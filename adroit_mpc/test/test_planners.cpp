@@ -1,6 +1,8 @@
-// Both planners in closed loop on small inline models (real MuJoCo): plan, apply the
-// policy's action to a separate simulation for a control period, repeat.
+// The planners in closed loop on small inline models (real MuJoCo): plan, apply the
+// policy's action to a separate simulation for a control period, repeat. Plus the pieces of
+// the sampling planners: the spline's shift, CEM's elite statistics, seeds, settings.
 #include <adroit_core/mujoco_model.h>
+#include <adroit_mpc/cem_planner.h>
 #include <adroit_mpc/ilqg_planner.h>
 #include <adroit_mpc/planner.h>
 #include <adroit_mpc/sampling_planner.h>
@@ -222,7 +224,7 @@ TEST(Planners, IlqgIterationLowersTheCostFromTheSameState) {
 
 TEST(Planners, DivergingTaskIsReportedAndThePolicyKept) {
   auto m = adroit::loadModelString(kPointMass).model;
-  for (const char* kind : {"ilqg", "sampling"}) {
+  for (const char* kind : {"ilqg", "sampling", "cem"}) {
     GoalTask task({0.3, -0.2}, 10.0, 0.1, 0.01);
     auto planner = makePlanner(kind);
     planner->initialize(m.get(), task, smallSettings(0.5));
@@ -249,7 +251,13 @@ TEST(Planners, DivergingTaskIsReportedAndThePolicyKept) {
 TEST(Planners, BadSettingsAndNamesAreRejected) {
   auto m = adroit::loadModelString(kPointMass).model;
   GoalTask task({0.3, -0.2}, 1, 1, 1);
-  EXPECT_THROW(makePlanner("cem"), std::invalid_argument);
+  EXPECT_EQ(makePlanner("cem")->name(), "cem");
+  try {
+    makePlanner("mppi");
+    FAIL() << "expected invalid_argument";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("ilqg, sampling, cem"), std::string::npos) << e.what();
+  }
   PlannerSettings s = smallSettings(0.5);
   s.dt = 0.005;  // model timestep is 0.01
   IlqgPlanner planner;
@@ -268,4 +276,214 @@ TEST(Planners, BadSettingsAndNamesAreRejected) {
   wrong.qpos = {0.0};  // nq is 2
   wrong.qvel = {0.0, 0.0};
   EXPECT_THROW(planner.setState(wrong), std::invalid_argument);
+}
+
+// ---- sampling planners: spline, CEM --------------------------------------------------------
+
+TEST(ControlSpline, ShiftResamplesTheHeldValuesAndSaysWhichPointsAreNew) {
+  ControlSpline s;
+  s.resize(4, 1, 8);  // spacing 0.1 s over a 0.4 s horizon of 8 knots
+  for (int j = 0; j < 4; ++j) s.values[j][0] = j;
+  EXPECT_EQ(s.atKnot(0)[0], 0);
+  EXPECT_EQ(s.atKnot(3)[0], 1);  // knot 3 of 8 lies in the second quarter
+  EXPECT_EQ(s.atKnot(7)[0], 3);
+  EXPECT_EQ(s.shiftTo(0.0, 0.4), 4);  // no shift: nothing new
+  // 0.15 s on: point j (at 0.15 + 0.1 j) held the old point j + 1; the last point lies past the
+  // old end and holds the old last value.
+  EXPECT_EQ(s.shiftTo(0.15, 0.4), 3);
+  EXPECT_DOUBLE_EQ(s.t0, 0.15);
+  EXPECT_EQ((std::vector<double>{s.values[0][0], s.values[1][0], s.values[2][0], s.values[3][0]}),
+            (std::vector<double>{1, 2, 3, 3}));
+  // Back in time (a reset simulation): the first value is held before the old start.
+  EXPECT_EQ(s.shiftTo(0.0, 0.4), 4);
+  EXPECT_EQ((std::vector<double>{s.values[0][0], s.values[1][0], s.values[2][0], s.values[3][0]}),
+            (std::vector<double>{1, 1, 1, 2}));
+  EXPECT_EQ(s.shiftTo(1e30, 0.4), 0);  // a huge jump: every point new, no overflow
+  EXPECT_EQ(s.values[0][0], 2);
+}
+
+TEST(Cem, EliteStatisticsByHand) {
+  // Two controls: range 2 and range 0 (a control fixed by its box). Three candidate splines of
+  // two points; the elites are candidates 1 and 0.
+  std::vector<ControlSpline> splines(3);
+  const double values[3][2] = {{0.2, 1.0}, {0.6, 1.0}, {1.6, 0.0}};
+  for (int i = 0; i < 3; ++i) {
+    splines[i].resize(2, 2, 2);
+    for (int j = 0; j < 2; ++j) splines[i].values[j] << values[i][j], 5.0;
+  }
+  const int elites[2] = {1, 0};
+  const Eigen::Vector2d range(2.0, 0.0);
+  ControlSpline mean, std;
+  mean.resize(2, 2, 2);
+  std.resize(2, 2, 2);
+  eliteStatistics(splines, elites, 2, range, 0.01, 0.5, mean, std);
+  EXPECT_NEAR(mean.values[0][0], 0.4, 1e-15);
+  EXPECT_NEAR(mean.values[1][0], 1.0, 1e-15);
+  EXPECT_EQ(mean.values[0][1], 5.0);
+  // Point 0: deviations +-0.2, std 0.2 = 0.1 of the range; point 1: no spread -> std_min.
+  EXPECT_NEAR(std.values[0][0], 0.1, 1e-15);
+  EXPECT_EQ(std.values[1][0], 0.01);
+  EXPECT_EQ(std.values[0][1], 0.01);  // zero range
+  // The same elites with a cap below their spread: clamped to std_max.
+  eliteStatistics(splines, elites, 2, range, 0.01, 0.05, mean, std);
+  EXPECT_EQ(std.values[0][0], 0.05);
+  // All three: means 0.8 and 2/3; point 0 deviates by -0.6, -0.2, 0.8: std sqrt(1.04 / 3) / 2.
+  const int all[3] = {0, 1, 2};
+  eliteStatistics(splines, all, 3, range, 0.01, 0.5, mean, std);
+  EXPECT_NEAR(mean.values[0][0], 0.8, 1e-15);
+  EXPECT_NEAR(mean.values[1][0], 2.0 / 3.0, 1e-15);
+  EXPECT_NEAR(std.values[0][0], std::sqrt(1.04 / 3) / 2, 1e-15);
+}
+
+TEST(Cem, DrivesPointMassToGoal) {
+  auto m = adroit::loadModelString(kPointMass).model;
+  GoalTask task({0.3, -0.2}, 10.0, 0.1, 0.01);
+  CemPlanner planner;
+  auto r = closedLoop(planner, m.get(), task, smallSettings(0.5), 3.0, 0.02);
+  EXPECT_LT(r.final_error, 0.03);
+  EXPECT_TRUE(r.controls_in_range);
+  EXPECT_EQ(r.diverged, 0);
+}
+
+TEST(SamplingPlanners, CostNeverRisesForAFixedState) {
+  auto m = adroit::loadModelString(kPendulum).model;
+  for (const char* kind : {"sampling", "cem"}) {
+    GoalTask task({0.6}, 10.0, 0.1, 0.001);
+    auto planner = makePlanner(kind);
+    PlannerSettings s = smallSettings(0.5);
+    s.samples = 8;
+    s.cem_elites = 3;
+    planner->initialize(m.get(), task, s);
+    double previous = std::numeric_limits<double>::infinity(), first = 0;
+    for (int i = 0; i < 15; ++i) {
+      OptimizeReport r = planner->optimize();  // the state stays at t = 0
+      if (i == 0) first = r.cost_before;
+      EXPECT_LE(r.cost_after, r.cost_before) << kind << " iteration " << i;
+      EXPECT_LE(r.cost_after, previous) << kind << " iteration " << i;
+      if (i > 0) {
+        EXPECT_EQ(r.cost_before, previous) << kind << ": the previous plan is candidate 0";
+      }
+      EXPECT_EQ(planner->bestTrajectory().cost, r.cost_after) << kind;
+      previous = r.cost_after;
+    }
+    EXPECT_LT(previous, 0.5 * first) << kind << ": the iterations did lower the cost";
+  }
+}
+
+TEST(Cem, OneEliteClampsTheStdAtItsMinimumAndThePlanIsTheMean) {
+  auto m = adroit::loadModelString(kPointMass).model;
+  GoalTask task({0.3, -0.2}, 10.0, 0.1, 0.01);
+  PlannerSettings s = smallSettings(0.5);
+  s.cem_elites = 1;  // no spread among one elite
+  s.cem_std_min = 0.02;
+  CemPlanner planner;
+  planner.initialize(m.get(), task, s);
+  for (const auto& v : planner.standardDeviation().values) EXPECT_TRUE((v.array() == s.cem_std_initial).all());
+  planner.optimize();
+  for (const auto& v : planner.standardDeviation().values) EXPECT_TRUE((v.array() == 0.02).all()) << v.transpose();
+  const Trajectory& plan = planner.bestTrajectory();
+  for (std::size_t t = 0; t < plan.controls.size(); ++t)
+    EXPECT_EQ(plan.controls[t], planner.mean().atKnot(static_cast<int>(t))) << "knot " << t;
+}
+
+TEST(Cem, StdFollowsTheElitesWithinItsBounds) {
+  auto m = adroit::loadModelString(kPointMass).model;
+  GoalTask task({0.3, -0.2}, 10.0, 0.1, 0.01);
+  PlannerSettings s = smallSettings(0.5);
+  s.cem_elites = 12;  // the best quarter of 48
+  s.cem_std_initial = 0.3;
+  s.cem_std_min = 0.001;
+  CemPlanner planner;
+  planner.initialize(m.get(), task, s);
+  // From the same state the elites concentrate: the average std (seeds 1-6: 0.15-0.19 after
+  // one iteration, 0.007-0.036 after six) falls well below the initial 0.3.
+  double average = 0;
+  for (int i = 0; i < 6; ++i) {
+    planner.optimize();
+    double sum = 0;
+    int n = 0;
+    for (const auto& v : planner.standardDeviation().values) {
+      EXPECT_GE(v.minCoeff(), 0.001);
+      EXPECT_LE(v.maxCoeff(), 0.3);
+      sum += v.sum();
+      n += static_cast<int>(v.size());
+    }
+    average = sum / n;
+    if (i == 0) {
+      EXPECT_LT(average, 0.7 * 0.3);
+    }
+  }
+  EXPECT_LT(average, 0.25 * 0.3);
+  // Bounds that meet: the std cannot move.
+  s.cem_std_min = s.cem_std_initial;
+  planner.initialize(m.get(), task, s);
+  for (int i = 0; i < 3; ++i) planner.optimize();
+  for (const auto& v : planner.standardDeviation().values) EXPECT_TRUE((v.array() == 0.3).all());
+}
+
+namespace {
+
+// The plan of `seed` after a short closed loop, with `threads` workers.
+Trajectory cemPlan(std::uint64_t seed, int threads) {
+  auto m = adroit::loadModelString(kPointMass).model;
+  GoalTask task({0.3, -0.2}, 10.0, 0.1, 0.01);
+  PlannerSettings s = smallSettings(0.5);
+  s.seed = seed;
+  s.threads = threads;
+  CemPlanner planner;
+  closedLoop(planner, m.get(), task, s, 0.2, 0.02);
+  return planner.bestTrajectory();
+}
+
+}  // namespace
+
+TEST(Cem, SameSeedSamePlanWhateverTheWorkers) {
+  const Trajectory a = cemPlan(7, 1), b = cemPlan(7, 2), c = cemPlan(8, 2);
+  ASSERT_EQ(a.controls.size(), b.controls.size());
+  EXPECT_EQ(a.cost, b.cost);
+  bool seed_matters = false;
+  for (std::size_t t = 0; t < a.controls.size(); ++t) {
+    EXPECT_EQ(a.controls[t], b.controls[t]) << "knot " << t;
+    EXPECT_EQ(a.states[t], b.states[t]) << "knot " << t;
+    seed_matters = seed_matters || a.controls[t] != c.controls[t];
+  }
+  EXPECT_TRUE(seed_matters) << "another seed gave the same plan";
+}
+
+TEST(Cem, BadSettingsAreRefusedNamingTheSetting) {
+  auto m = adroit::loadModelString(kPointMass).model;
+  GoalTask task({0.3, -0.2}, 1, 1, 1);
+  const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
+  struct Case {
+    const char* setting;
+    void (*bend)(PlannerSettings&, double, double);
+  };
+  const Case cases[] = {
+      {"cem_elites", [](PlannerSettings& s, double, double) { s.cem_elites = 0; }},
+      {"cem_elites", [](PlannerSettings& s, double, double) { s.cem_elites = s.samples + 1; }},
+      {"cem_std_initial", [](PlannerSettings& s, double, double) { s.cem_std_initial = 0; }},
+      {"cem_std_initial", [](PlannerSettings& s, double n, double) { s.cem_std_initial = n; }},
+      {"cem_std_initial", [](PlannerSettings& s, double, double i) { s.cem_std_initial = i; }},
+      {"cem_std_min", [](PlannerSettings& s, double, double) { s.cem_std_min = -0.01; }},
+      {"cem_std_min", [](PlannerSettings& s, double n, double) { s.cem_std_min = n; }},
+      {"cem_std_min", [](PlannerSettings& s, double, double) { s.cem_std_min = 2 * s.cem_std_initial; }},
+  };
+  for (const Case& c : cases) {
+    PlannerSettings s = smallSettings(0.5);
+    c.bend(s, nan, inf);
+    CemPlanner planner;
+    try {
+      planner.initialize(m.get(), task, s);
+      ADD_FAILURE() << "accepted a bad " << c.setting;
+    } catch (const std::invalid_argument& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find(c.setting), std::string::npos) << what;
+      EXPECT_EQ(what.find('\n'), std::string::npos) << what;
+    }
+  }
+  PlannerSettings s = smallSettings(0.5);
+  s.cem_elites = s.samples;
+  s.cem_std_min = s.cem_std_initial;
+  CemPlanner planner;
+  EXPECT_NO_THROW(planner.initialize(m.get(), task, s)) << "the bounds themselves are allowed";
 }

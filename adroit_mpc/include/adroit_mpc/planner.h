@@ -1,4 +1,4 @@
-// The planner lifecycle shared by iLQG and predictive sampling (DESIGN.md §2; structure after
+// The planner lifecycle shared by iLQG, predictive sampling and CEM (DESIGN.md §2; structure after
 // MuJoCo MPC): initialise (allocate everything once), set state, optimise (warm-started by
 // shifting the previous plan), policy / action at any time, best trajectory.
 #pragma once
@@ -13,6 +13,7 @@
 
 #include <Eigen/Dense>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <memory>
 #include <string>
@@ -41,10 +42,17 @@ struct PlannerSettings {
   bool fd_warmstart = true;
   double mu_initial = 1e-6;  // LM regularisation (small: MPC must take large steps, thesis 6.4)
   double feedback_scale = 1.0;
-  // predictive sampling
-  int samples = 16;
-  double noise_scale = 0.1;  // fraction of each control's range
+  // sampling planners (predictive sampling, cross entropy)
+  int samples = 16;          // candidates per iteration, the current plan's spline included
   int spline_points = 5;     // control knots of a sampled plan (zero-order hold between)
+  std::uint64_t seed = 0x5eed;  // candidate i draws its noise from the stream seed + 7919 i
+  double noise_scale = 0.1;  // predictive sampling: fraction of each control's range
+  // cross entropy: the elites are the cem_elites cheapest candidates; the sampling std per
+  // spline value (fraction of each control's range) starts at cem_std_initial and follows
+  // the elites' spread within [cem_std_min, cem_std_initial].
+  int cem_elites = 4;
+  double cem_std_initial = 0.2;
+  double cem_std_min = 0.05;  // the floor keeps the MPC exploring as the state moves on
 };
 
 // Time split of one optimize() (thesis table 6.2), seconds.
@@ -108,7 +116,7 @@ class Planner {
   virtual void reset() = 0;
 };
 
-// "ilqg" or "sampling"; throws std::invalid_argument naming the known planners.
+// "ilqg", "sampling" or "cem"; throws std::invalid_argument naming the known planners.
 std::unique_ptr<Planner> makePlanner(const std::string& name);
 
 // ---- Building blocks shared by the planners -------------------------------------------

@@ -52,10 +52,11 @@
 // at 200 Hz on the sensed pressures, config/pools.yaml settings, identified models), whose
 // valve commands drive the plant, as the node does in mode:=pneumatic. The pools' CPU time
 // is not charged to the planner (they run beside it). The planner plans on the planning
-// model from the true simulated state. An optimisation that took c seconds of wall time on this
-// machine is applied c seconds of simulated time after the state it started from, and the
-// previous policy runs in between (exactly what the node's planner thread does against a
-// driver running in real time, with the cores to itself). The planner optimises ten times
+// model from the true simulated state. The closed loop is the node's own (adroit_mpc::MpcRunner,
+// mpc_runner.h) in emulated real time: a plan whose planOnce took c seconds of wall time on this
+// machine takes over c seconds of simulated time after the state it started from, and the
+// previous policy runs in between (what the node's planner thread does against a driver
+// running in real time, with the cores to itself). The planner optimises ten times
 // before the trial starts, then runs closed loop for 0.3 s with the object held at its start
 // (the MPC runs before the object is released; the pools pressurise the cylinders).
 //
@@ -93,7 +94,7 @@
 #include <adroit_pneumatics/plant.h>
 #include <adroit_pneumatics/pool.h>
 #include <adroit_pneumatics/tracking_floor.h>
-#include <adroit_mpc/latency_compensation.h>
+#include <adroit_mpc/mpc_runner.h>
 #include <adroit_mpc/planner.h>
 #include <adroit_mpc/planning_model.h>
 #include <adroit_mpc/synergies.h>
@@ -110,6 +111,7 @@
 #include <cstring>
 #include <fstream>
 #include <map>
+#include <mutex>
 #include <random>
 #include <sstream>
 #include <string>
@@ -263,7 +265,6 @@ class TrialRunner {
     const std::string share = descriptionShareDir();
     plan_model_ = loadPlanningModel(adroit::description::sceneFile(share, sceneOf(task), true), ms);
     observe_ = adroit::makeData(plan_model_.get());
-    predictor_.initialize(plan_model_.get());
 
     // The simulation driver's ROS-free core: physics, the pneumatic plant, sensors, safety.
     adroit::driver::SimConfig config;
@@ -302,10 +303,49 @@ class TrialRunner {
   }
 
   TrialResult run(const TrialSpec& spec) {
+    resetWorld(spec);
+    // --idle: the hand rests over the keys that long, closed loop, before the sequence comes.
+    const bool idle_first = task_name_ == "type" && idle_ > 0;
+    keys_registered_ = 0;
+    runner_ = makeRunner(makeTrialTask(spec, idle_first));
+    TrialResult r;
+    force_trace_.clear();
+    r.lowest_z = 1e9;
+    // Before the trial: optimisations with the world frozen, then a pre-roll in closed loop
+    // with the object held at its start (the pools pressurise the cylinders to the plan's
+    // tensions; a real hand is already holding its posture when the object is let go).
+    Progress p;
+    p.sequence_given = !idle_first;
+    p.release = robot_->data()->time + kPreRoll;
+    p.sequence = p.release + (idle_first ? idle_ : 0.0);
+    p.end = p.sequence + (task_name_ == "type" ? 1.5 * spec.keys.size() + 0.5 : duration_);
+    closedLoop(spec, p, r);
+    score(spec, p, r);
+    return r;
+  }
+
+ private:
+  // One trial's timeline and what has happened so far.
+  struct Progress {
+    double release = 0, sequence = 0, end = 0;  // simulated s: object let go, keys given, trial over
+    bool goal_given = false, sequence_given = false;
+    std::vector<double> plan_seconds, start_errors;
+    std::array<std::vector<double>, 5> phases;
+  };
+
+  // The plan's tensions over its horizon as the node sends them to the pools
+  // (/adroit/force_reference): knots from the plan's start, in the robot's clock.
+  struct Reference {
+    double t0 = 0, dt = 0;
+    std::size_t steps = 0;
+    std::vector<double> force;
+  };
+
+  // A new robot per trial: its sensor noise restarts from the seed and no command, valve
+  // state or watchdog state of the previous trial carries over, so a trial's outcome does
+  // not depend on the trials before it (--only-trial K reproduces trial K of a run).
+  void resetWorld(const TrialSpec& spec) {
     std::string why;
-    // A new robot per trial: its sensor noise restarts from the seed and no command, valve
-    // state or watchdog state of the previous trial carries over, so a trial's outcome does
-    // not depend on the trials before it (--only-trial K reproduces trial K of a run).
     robot_ = std::make_unique<adroit::driver::SimulatedRobot>(robot_config_);
     if (!robot_->resetToKeyframe("rest", &why)) throw std::runtime_error("reset: " + why);
     const bool has_object = task_name_ == "catch" || task_name_ == "relocate";
@@ -320,127 +360,130 @@ class TrialRunner {
       last_floor_time_ = robot_->clock();
     }
     next_tick_ = robot_->clock();
+  }
+
+  std::unique_ptr<Task> makeTrialTask(const TrialSpec& spec, bool idle_first) const {
     TaskParams params;
     for (const auto& [key, value] : param_overrides_) params.numbers[key] = value;
     if (task_name_ == "catch") params.vectors["goal_position"] = {spec.goal.x(), spec.goal.y(), spec.goal.z()};
     auto task = makeTask(task_name_, params);
     task->bind(plan_model_.get(), variant_.synergies ? Synergies::kCount : 0);
-    // --idle: the hand rests over the keys that long, closed loop, before the sequence comes.
-    const bool idle_first = task_name_ == "type" && idle_ > 0;
+    std::string why;
     if (!idle_first && !spec.keys.empty() && !task->setSequence(spec.keys, &why)) throw std::runtime_error(why);
-    bool sequence_given = !idle_first;
-    keys_registered_ = 0;
-    auto planner = makePlanner(variant_.planner);
-    planner->initialize(plan_model_.get(), *task, settings_);
+    return task;
+  }
 
-    TrialResult r;
-    force_trace_.clear();
-    r.lowest_z = 1e9;
-    std::vector<double> plan_seconds, start_errors;
-    std::array<std::vector<double>, 5> phases;
-    LatencyEstimate latency_estimate;
-    PlanPolicy active, fresh;
-    bool have_policy = false;
-    Reference active_reference, fresh_reference;
-    PlannerState state;
-    const mjModel* m = robot_->model();
+  // The node's closed loop (adroit_mpc/mpc_runner.h) in emulated real time: a plan takes over
+  // its latency after the state it started from (the wall time of planOnce, or
+  // --fixed-latency), and the running policy carries the world on meanwhile.
+  std::unique_ptr<MpcRunner> makeRunner(std::unique_ptr<Task> task) {
+    RunnerSettings rs;
+    rs.timing = PlanTiming::kEmulated;
+    rs.fixed_latency = fixed_latency_;
+    rs.latency_compensation = variant_.compensate && compensation_;
+    rs.feedback_scale = feedback_scale_;
+    rs.on_events = [this](double t, const std::vector<TaskEvent>& events) { noteEvents(t, events); };
+    return std::make_unique<MpcRunner>(plan_model_.get(), makePlanner(variant_.planner), std::move(task), settings_,
+                                       std::move(rs));
+  }
+
+  void closedLoop(const TrialSpec& spec, Progress& p, TrialResult& r) {
     const mjData* d = robot_->data();
-    // Before the trial: optimisations with the world frozen, then a pre-roll in closed loop
-    // with the object held at its start (the pools pressurise the cylinders to the plan's
-    // tensions; a real hand is already holding its posture when the object is let go).
+    Reference fresh_reference;  // open-loop variant: the plan's tensions, sent when it takes over
     int warmup = kWarmupIterations;
-    bool goal_given = false;
-    const double release_time = d->time + kPreRoll;
-    const double sequence_time = release_time + (idle_first ? idle_ : 0.0);
-    const double duration = sequence_time + (task_name_ == "type" ? 1.5 * spec.keys.size() + 0.5 : duration_);
-    while (d->time < duration) {
+    while (d->time < p.end) {
       // The state the optimisation starts from; the task's progress observed on it.
-      state.time = d->time;
-      measure(state.qpos, state.qvel);
-      state.act.assign(d->act, d->act + m->na);
-      if (task_name_ == "relocate" && !goal_given && d->time >= release_time + kRelocateGoalDelay) {
-        goal_given = true;  // as a user would: once the ball is held
-        if (!task->setGoal(spec.goal, Eigen::Quaterniond::Identity(), &why)) throw std::runtime_error("goal: " + why);
-      }
-      if (!sequence_given && d->time >= sequence_time) {
-        sequence_given = true;
-        r.unasked = keys_registered_;
-        if (!task->setSequence(spec.keys, &why)) throw std::runtime_error(why);
-      }
-      observeState(*task, state);
-      planner->setTask(*task);
-      // The running policy carries the world on while this optimisation computes (not while
-      // the world waits before the trial); the prediction's time counts as the plan's.
-      adroit::Stopwatch clock;
-      if (variant_.compensate && compensation_ && warmup == 0 && have_policy)
-        predictor_.predict(active, feedback_scale_, fixed_latency_ >= 0 ? fixed_latency_ : latency_estimate.expected(),
-                           state);
-      planner->setState(state);
-      const OptimizeReport report = planner->optimize();
-      const std::array<double, 5> split{report.rollout, report.derivatives, report.cost, report.backward,
-                                        report.line_search};
-      for (std::size_t k = 0; k < phases.size(); ++k) phases[k].push_back(split[k]);
-      const double latency = fixed_latency_ >= 0 ? fixed_latency_ : clock.elapsed();
-      plan_seconds.push_back(latency);
-      latency_estimate.record(latency);
-      if (report.diverged) {
-        ++r.diverged;
-      } else {
-        planner->policy(fresh);
-        if (variant_.open_loop_reference) takeReference(planner->bestTrajectory(), state.time, fresh_reference);
-      }
-      if (warmup > 0) {  // before the release: the world waits
+      plan_input_.time = d->time;
+      measure(plan_input_.qpos, plan_input_.qvel);
+      plan_input_.act.assign(d->act, d->act + robot_->model()->na);
+      giveCommands(spec, p, r);
+      const PlanOutcome plan = runner_->planOnce(plan_input_, warmup > 0);
+      recordPlan(plan, p, r);
+      if (plan.published && variant_.open_loop_reference)
+        takeReference(runner_->planner().bestTrajectory(), runner_->planState().time, fresh_reference);
+      if (warmup > 0) {  // before the release: the world waits, and the plan takes over at once
         --warmup;
-        std::swap(active, fresh);
-        std::swap(active_reference, fresh_reference);
-        have_policy = !report.diverged;
-        if (have_policy && variant_.open_loop_reference) sendReference(active_reference);
+        takeOver(fresh_reference);
         continue;
       }
       // The previous policy runs while this optimisation computes.
-      const double switch_time = d->time + latency;
-      while (d->time < switch_time && d->time < duration) {
-        stepOnce(active, have_policy, *task, r, d->time < release_time ? &spec.object_start : nullptr);
-        if (goal_given && grasp_site_ >= 0 && object_body_ >= 0) {
+      const double plan_end = plan_input_.time + plan.latency;
+      while (d->time < plan_end && d->time < p.end) {
+        stepOnce(r, d->time < p.release ? &spec.object_start : nullptr);
+        if (p.goal_given && grasp_site_ >= 0 && object_body_ >= 0) {
           const Eigen::Map<const Eigen::Vector3d> object(d->xpos + 3 * object_body_), grasp(d->site_xpos + 3 * grasp_site_);
           r.farthest_from_grasp = std::max(r.farthest_from_grasp, (object - grasp).norm());
         }
       }
-      if (!report.diverged) {
-        if (d->time >= release_time) start_errors.push_back(jointDistance(state.qpos));
-        std::swap(active, fresh);
-        std::swap(active_reference, fresh_reference);
-        have_policy = true;
-        if (variant_.open_loop_reference) sendReference(active_reference);
-      }
-      if (task_name_ == "type" && sequence_given && task->error(plan_model_.get(), observe_.get()) == 0) break;
+      if (plan.published && d->time >= p.release) recordStartError(p, runner_->planState().qpos);
+      takeOver(fresh_reference);
+      if (task_name_ == "type" && p.sequence_given && taskError(plan_model_.get(), observe_.get()) == 0) break;
     }
-    r.duration = d->time - sequence_time;
-    r.plan_ms_median = 1e3 * adroit::percentile(plan_seconds, 50);
-    for (std::size_t k = 0; k < phases.size(); ++k) r.phase_ms_median[k] = 1e3 * adroit::percentile(phases[k], 50);
-    r.start_error_median = start_errors.empty() ? 0 : adroit::percentile(start_errors, 50);
+  }
+
+  // As a user would: the relocation goal once the ball is held, the keys after --idle.
+  void giveCommands(const TrialSpec& spec, Progress& p, TrialResult& r) {
+    const double t = robot_->data()->time;
+    std::string why;
+    std::lock_guard<std::mutex> lock(runner_->taskMutex());
+    if (task_name_ == "relocate" && !p.goal_given && t >= p.release + kRelocateGoalDelay) {
+      p.goal_given = true;
+      if (!runner_->task().setGoal(spec.goal, Eigen::Quaterniond::Identity(), &why))
+        throw std::runtime_error("goal: " + why);
+    }
+    if (!p.sequence_given && t >= p.sequence) {
+      p.sequence_given = true;
+      r.unasked = keys_registered_;
+      if (!runner_->task().setSequence(spec.keys, &why)) throw std::runtime_error(why);
+    }
+  }
+
+  void recordPlan(const PlanOutcome& plan, Progress& p, TrialResult& r) const {
+    const OptimizeReport& report = plan.report;
+    const std::array<double, 5> split{report.rollout, report.derivatives, report.cost, report.backward,
+                                      report.line_search};
+    for (std::size_t k = 0; k < p.phases.size(); ++k) p.phases[k].push_back(split[k]);
+    p.plan_seconds.push_back(plan.latency);
+    if (!plan.published) ++r.diverged;
+  }
+
+  // The plan's starting state against the world when the plan takes over.
+  void recordStartError(Progress& p, const std::vector<double>& plan_qpos) const {
+    p.start_errors.push_back(jointDistance(plan_qpos));
+  }
+
+  // The control side takes the new plan over once the world's clock has reached its time.
+  void takeOver(Reference& fresh_reference) {
+    if (!runner_->updatePolicy(robot_->data()->time) || !variant_.open_loop_reference) return;
+    std::swap(active_reference_, fresh_reference);
+    sendReference(active_reference_);
+  }
+
+  void score(const TrialSpec& spec, const Progress& p, TrialResult& r) {
+    const mjModel* m = robot_->model();
+    const mjData* d = robot_->data();
+    r.duration = d->time - p.sequence;
+    r.plan_ms_median = 1e3 * adroit::percentile(p.plan_seconds, 50);
+    for (std::size_t k = 0; k < p.phases.size(); ++k) r.phase_ms_median[k] = 1e3 * adroit::percentile(p.phases[k], 50);
+    r.start_error_median = p.start_errors.empty() ? 0 : adroit::percentile(p.start_errors, 50);
+    std::lock_guard<std::mutex> lock(runner_->taskMutex());
     if (task_name_ == "type") {
-      auto& type = static_cast<TypeTask&>(*task);
+      auto& type = static_cast<TypeTask&>(runner_->task());
       r.keys_total = static_cast<int>(spec.keys.size());
       r.keys_correct = type.typedCorrectly();
       r.final_error = r.keys_total - r.keys_correct;
       r.success = r.keys_correct == r.keys_total;
     } else {
-      r.final_error = task->error(m, d);
+      r.final_error = runner_->task().error(m, d);
       r.success = r.final_error <= 0.03 && (task_name_ != "catch" || r.lowest_z >= 0.2);
     }
     if (robot_->safety().safe_state) r.success = false;  // a watchdog trip or fault ends the trial badly
-    return r;
   }
 
- private:
-  // The plan's tensions over its horizon as the node sends them to the pools
-  // (/adroit/force_reference): knots from the plan's start, in the robot's clock.
-  struct Reference {
-    double t0 = 0, dt = 0;
-    std::size_t steps = 0;
-    std::vector<double> force;
-  };
+  double taskError(const mjModel* m, const mjData* d) {
+    std::lock_guard<std::mutex> lock(runner_->taskMutex());
+    return runner_->task().error(m, d);
+  }
 
   void takeReference(const Trajectory& plan, double plan_time, Reference& out) const {
     const std::size_t knots = std::min(plan.ctrl.size(), plan.times.size());
@@ -461,8 +504,11 @@ class TrialRunner {
     sent_ = ref;
   }
   Reference sent_;  // the last reference sent (open-loop variant)
+  Reference active_reference_;  // open-loop variant: the running plan's
 
-  void observeState(Task& task, const PlannerState& s) {
+  // The task's progress on the true state, between plans (typing registers keys at the
+  // control rate); planOnce observes it on each plan's state too (noteEvents).
+  void observeState(const PlannerState& s) {
     const mjModel* pm = plan_model_.get();
     mjData* o = observe_.get();
     o->time = s.time;
@@ -470,55 +516,39 @@ class TrialRunner {
     mju_copy(o->qvel, s.qvel.data(), pm->nv);
     if (pm->na) mju_copy(o->act, s.act.data(), pm->na);
     mj_forward(pm, o);
-    for (const auto& e : task.observe(pm, o, s.time)) {
+    std::vector<TaskEvent> events;
+    {
+      std::lock_guard<std::mutex> lock(runner_->taskMutex());
+      events = runner_->task().observe(pm, o, s.time);
+    }
+    noteEvents(s.time, events);
+  }
+
+  void noteEvents(double t, const std::vector<TaskEvent>& events) {
+    for (const auto& e : events) {
       keys_registered_ += e.kind == "key";
-      if (print_events_) std::printf("  t %.3f %s %s\n", s.time, e.kind.c_str(), e.detail.c_str());
+      if (print_events_) std::printf("  t %.3f %s %s\n", t, e.kind.c_str(), e.detail.c_str());
     }
   }
 
-  // One driver step (2 ms). Force mode: the policy's tensions every step. Pneumatic mode:
-  // the pools tick at 200 Hz on the sensed actuator state and command the valves.
+  // One driver step (2 ms). The runner's control side first takes a plan over whose time has
+  // come. Force mode: the policy's tensions every step. Pneumatic mode: the pools tick at
+  // 200 Hz on the sensed actuator state and command the valves. Without a usable policy (none
+  // yet, or one older than its horizon) nothing is sent, as by the node.
   // hold_object: keep the object at this position, at rest (pre-roll).
-  void stepOnce(const PlanPolicy& policy, bool have_policy, Task& task, TrialResult& r,
-                const Eigen::Vector3d* hold_object) {
+  void stepOnce(TrialResult& r, const Eigen::Vector3d* hold_object) {
     const mjModel* m = robot_->model();
     const mjData* d = robot_->data();
     measure(qpos_, qvel_);
+    runner_->updatePolicy(d->time);
     if (!variant_.pneumatic) {
-      if (have_policy) policy.action(d->time, qpos_.data(), qvel_.data(), d->act, ctrl_.data(), feedback_scale_);
-      else std::fill(ctrl_.begin(), ctrl_.end(), 0.0);
-      for (double& u : ctrl_) u = std::isfinite(u) ? std::max(0.0, u) : 0.0;
-      robot_->commandForces({}, all_actuators_, ctrl_);
+      if (runner_->action(d->time, qpos_.data(), qvel_.data(), d->act, ctrl_.data())) {
+        for (double& u : ctrl_) u = std::max(0.0, u);
+        robot_->commandForces({}, all_actuators_, ctrl_);
+      }
     } else if (robot_->clock() + 1e-9 >= next_tick_) {
       next_tick_ += kPoolPeriod;
-      const auto& sensed = robot_->sensed();
-      const double now = robot_->clock();
-      if (have_policy && !variant_.open_loop_reference) {
-        // As the node's control loop in pneumatic mode: the policy with feedback on the
-        // current state, over the rest of its horizon, at the pools' rate.
-        const int samples = policy.reference(d->time, qpos_.data(), qvel_.data(), d->act, kMaxReferenceSamples,
-                                             reference_.data(), feedback_scale_);
-        const auto verdict = pool_->setReference(now, now, policy.policy.dt, samples, robot_->cylinderNames(),
-                                                 positive(reference_, samples * m->nu));
-        if (!verdict.ok()) throw std::runtime_error("pool rejected the policy's reference: " + verdict.detail);
-        preview_audit_->addReference(now, policy.policy.dt, static_cast<std::size_t>(samples),
-                                     {reference_.begin(), reference_.begin() + samples * m->nu});
-        recordForceTracking(sensed);
-      } else if (have_policy && sent_.steps > 0) {  // the last plan's tensions, interpolated at now
-        const std::size_t nu = all_actuators_.size();
-        const double x = std::clamp((now - sent_.t0) / sent_.dt, 0.0, static_cast<double>(sent_.steps - 1));
-        const auto k0 = static_cast<std::size_t>(x), k1 = std::min(k0 + 1, sent_.steps - 1);
-        for (std::size_t j = 0; j < nu; ++j)
-          reference_[j] = sent_.force[k0 * nu + j] + (x - k0) * (sent_.force[k1 * nu + j] - sent_.force[k0 * nu + j]);
-        recordForceTracking(sensed);
-      }
-      const auto verdict = pool_->setState(now, now, robot_->cylinderNames(), sensed.pressure, sensed.length,
-                                           sensed.length_rate, sensed.supply_pressure);
-      if (!verdict.ok()) throw std::runtime_error("pool rejected the actuator state: " + verdict.detail);
-      adroit::Stopwatch pool_clock;
-      const std::vector<double>& volts = pool_->update(now);
-      pool_seconds_.push_back(pool_clock.elapsed());
-      robot_->commandValves(pool_->names(), {}, volts);
+      poolTick();
     }
     if (hold_object) {
       std::string why;
@@ -535,16 +565,54 @@ class TrialRunner {
         s.qpos.assign(d->qpos, d->qpos + m->nq);
         s.qvel.assign(d->qvel, d->qvel + m->nv);
         s.act.assign(d->act, d->act + m->na);
-        observeState(task, s);
+        observeState(s);
       }
     } else if (object_body_ >= 0) {
       r.lowest_z = std::min(r.lowest_z, d->xpos[3 * object_body_ + 2]);
     }
     if (d->time >= next_trace_) {
       next_trace_ = d->time + 0.02;
-      r.trace.emplace_back(d->time, task_name_ == "type" ? task.error(plan_model_.get(), observe_.get()) : task.error(m, d));
+      r.trace.emplace_back(d->time, task_name_ == "type" ? taskError(plan_model_.get(), observe_.get()) : taskError(m, d));
       r.qpos_trace.emplace_back(d->qpos, d->qpos + m->nq);
     }
+  }
+
+  // The pools' 200 Hz tick: a reference from the policy (or the open-loop plan), the sensed
+  // actuator state, the valve commands.
+  void poolTick() {
+    const mjModel* m = robot_->model();
+    const mjData* d = robot_->data();
+    const auto& sensed = robot_->sensed();
+    const double now = robot_->clock();
+    if (!variant_.open_loop_reference) {
+      // As the node's control loop in pneumatic mode: the policy with feedback on the
+      // current state, over the rest of its horizon, at the pools' rate.
+      const int samples = runner_->reference(d->time, qpos_.data(), qvel_.data(), d->act, kMaxReferenceSamples,
+                                             reference_.data());
+      if (samples > 0) {
+        const double dt = runner_->policy().policy.dt;
+        const auto verdict = pool_->setReference(now, now, dt, samples, robot_->cylinderNames(),
+                                                 positive(reference_, samples * m->nu));
+        if (!verdict.ok()) throw std::runtime_error("pool rejected the policy's reference: " + verdict.detail);
+        preview_audit_->addReference(now, dt, static_cast<std::size_t>(samples),
+                                     {reference_.begin(), reference_.begin() + samples * m->nu});
+        recordForceTracking(sensed);
+      }
+    } else if (runner_->hasPolicy() && sent_.steps > 0) {  // the last plan's tensions, interpolated at now
+      const std::size_t nu = all_actuators_.size();
+      const double x = std::clamp((now - sent_.t0) / sent_.dt, 0.0, static_cast<double>(sent_.steps - 1));
+      const auto k0 = static_cast<std::size_t>(x), k1 = std::min(k0 + 1, sent_.steps - 1);
+      for (std::size_t j = 0; j < nu; ++j)
+        reference_[j] = sent_.force[k0 * nu + j] + (x - k0) * (sent_.force[k1 * nu + j] - sent_.force[k0 * nu + j]);
+      recordForceTracking(sensed);
+    }
+    const auto verdict = pool_->setState(now, now, robot_->cylinderNames(), sensed.pressure, sensed.length,
+                                         sensed.length_rate, sensed.supply_pressure);
+    if (!verdict.ok()) throw std::runtime_error("pool rejected the actuator state: " + verdict.detail);
+    adroit::Stopwatch pool_clock;
+    const std::vector<double>& volts = pool_->update(now);
+    pool_seconds_.push_back(pool_clock.elapsed());
+    robot_->commandValves(pool_->names(), {}, volts);
   }
 
  public:
@@ -706,9 +774,10 @@ class TrialRunner {
   Variant variant_;
   PlannerSettings settings_;
   adroit::ModelPtr plan_model_;
-  StatePredictor predictor_;
   bool compensation_ = false;  // the task's hint unless --compensation
   adroit::DataPtr observe_;
+  std::unique_ptr<MpcRunner> runner_;  // this trial's closed loop
+  PlannerState plan_input_;             // the state each plan starts from
   adroit::driver::SimConfig robot_config_;
   std::unique_ptr<adroit::driver::SimulatedRobot> robot_;
   std::vector<std::uint16_t> all_actuators_;
@@ -1056,3 +1125,4 @@ int main(int argc, char** argv) {
   }
   return 0;
 }
+

@@ -40,7 +40,7 @@ const float kTipColours[5][3] = {{0.9f, 0.2f, 0.2f}, {0.9f, 0.6f, 0.1f}, {0.3f, 
 void MpcNode::takeMarkerSnapshot() {
   std::unique_lock<std::mutex> lock(marker_mutex_, std::try_to_lock);  // the planner never waits
   if (!lock.owns_lock()) return;
-  marker_plan_ = planner_->bestTrajectory();  // same sizes after the first copy: no allocation
+  marker_plan_ = runner_->planner().bestTrajectory();  // same sizes after the first copy: no allocation
   marker_fresh_ = true;
 }
 
@@ -106,7 +106,7 @@ void MpcNode::onMarkerTimer(const ros::WallTimerEvent&) {
   }
   std::optional<geometry_msgs::Pose> goal;
   {
-    std::lock_guard<std::mutex> lock(task_mutex_);
+    std::lock_guard<std::mutex> lock(runner_->taskMutex());
     goal = goal_;
   }
   if (goal) {
@@ -125,17 +125,11 @@ void MpcNode::onMarkerTimer(const ros::WallTimerEvent&) {
 }
 
 void MpcNode::onDiagnostics(const ros::WallTimerEvent& event) {
-  Window w;
-  adroit_mpc::OptimizeReport last;
-  {
-    std::lock_guard<std::mutex> lock(stats_mutex_);
-    w = window_;
-    window_ = Window();
-    last = last_report_;
-  }
+  const adroit_mpc::RunnerWindow w = runner_->takeWindow();
+  const adroit_mpc::OptimizeReport last = runner_->lastReport();
   const double window = std::max(1e-9, (event.current_real - event.last_real).toSec());
   static std::uint64_t last_diverged = 0, last_rejected = 0;  // one node per process
-  const std::uint64_t diverged = diverged_.load(), rejected = rejections_.total();
+  const std::uint64_t diverged = runner_->diverged(), rejected = rejections_.total();
   const double state_age = stateAgeWall();
 
   rosutil::StatusBuilder s("adroit_mpc", "behaviour MPC");
@@ -154,8 +148,8 @@ void MpcNode::onDiagnostics(const ros::WallTimerEvent& event) {
   s.add("planner", params_.planner);
   s.add("mode", params_.force_mode ? "force" : "pneumatic");
   s.add("lockstep", params_.lockstep);
-  s.add("horizon_s", horizon_.load());
-  s.add("solves", solves_.load());
+  s.add("horizon_s", runner_->planningHorizon());
+  s.add("solves", runner_->solves());
   s.add("solve_rate_hz", w.solves / window);
   // Thesis table 6.2: mean time of each part of an optimise in this window.
   s.add("time_rollout_ms", 1e3 * w.sum.rollout / n);
@@ -176,7 +170,7 @@ void MpcNode::onDiagnostics(const ros::WallTimerEvent& event) {
   s.add("plan_latency_ms", 1e3 * w.latency_sum / n);
   s.add("latency_compensated_ms", 1e3 * w.compensated_sum / n);
   s.add("diverged", diverged);
-  s.add("policies_published", policies_published_.load());
+  s.add("policies_published", runner_->published());
   s.add("commands_sent", commands_sent_.load());
   s.add("references_sent", references_sent_.load());
   s.add("state_age_ms", std::isfinite(state_age) ? 1e3 * state_age : -1.0);

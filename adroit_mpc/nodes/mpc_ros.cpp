@@ -68,19 +68,14 @@ MpcNode::MpcNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   planner_state_.qpos = incoming_.qpos;
   planner_state_.qvel = incoming_.qvel;
   planner_state_.act = incoming_.act;
-  observe_data_ = makeData(m);
   marker_data_ = makeData(m);
-  running_policy_.bind(m);
-  predictor_.initialize(m);
 
   std::string why;
-  live_task_ = buildTask(params_.task, &why);
-  if (!live_task_) throw ParameterError("bad parameter " + pnh_.resolveName("task") + ": " + why);
+  std::unique_ptr<adroit_mpc::Task> task = buildTask(params_.task, &why);
+  if (!task) throw ParameterError("bad parameter " + pnh_.resolveName("task") + ": " + why);
   task_name_ = params_.task;
-  planner_ = adroit_mpc::makePlanner(params_.planner);
-  planner_->initialize(m, *live_task_, params_.settings);
-  horizon_ = params_.settings.horizon;
-  policies_.bind(m);
+  runner_ = std::make_unique<adroit_mpc::MpcRunner>(m, adroit_mpc::makePlanner(params_.planner), std::move(task),
+                                                    params_.settings, runnerSettings());
 
   ctrl_.assign(m->nu, 0.0);
   force_msg_.index.resize(m->nu);
@@ -120,9 +115,9 @@ MpcNode::MpcNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   setupGoalMarker();
   // Dynamic reconfigure starts from the running task's weights and the horizon.
   {
-    std::lock_guard<std::mutex> lock(task_mutex_);
+    std::lock_guard<std::mutex> lock(runner_->taskMutex());
     pnh_.setParam("horizon", params_.settings.horizon);
-    for (const auto& w : live_task_->weightNames()) pnh_.setParam(w, live_task_->weight(w));
+    for (const auto& w : runner_->task().weightNames()) pnh_.setParam(w, runner_->task().weight(w));
   }
   reconfigure_ = std::make_unique<dynamic_reconfigure::Server<Config>>(reconfigure_mutex_, pnh_);
   reconfigure_->setCallback([this](Config& config, uint32_t level) { onReconfigure(config, level); });
@@ -174,76 +169,25 @@ void MpcNode::stop() {
 
 // --- planner thread ------------------------------------------------------------------------
 
+adroit_mpc::RunnerSettings MpcNode::runnerSettings() {
+  adroit_mpc::RunnerSettings r;
+  r.timing = adroit_mpc::PlanTiming::kRealTime;  // a plan is acted on from its publication
+  r.clock = [this] { return nodeTime(ros::Time::now()); };  // the robot's clock: latency from a state's stamp
+  r.latency_compensation = params_.latency_compensation;
+  r.feedback_scale = params_.feedback_scale;
+  r.on_events = [this](double, const std::vector<adroit_mpc::TaskEvent>& events) { publishEvents(events); };
+  return r;
+}
+
 bool MpcNode::planOnce(const StateSnapshot& state) {
-  const mjModel* m = model_.get();
   planner_state_.time = state.time;
   std::copy(state.qpos.begin(), state.qpos.end(), planner_state_.qpos.begin());
   std::copy(state.qvel.begin(), state.qvel.end(), planner_state_.qvel.begin());
   std::copy(state.act.begin(), state.act.end(), planner_state_.act.begin());
-
-  // The task's progress on the real system (key presses, phases) from the estimated state.
-  mjData* d = observe_data_.get();
-  d->time = state.time;
-  mju_copy(d->qpos, state.qpos.data(), m->nq);
-  mju_copy(d->qvel, state.qvel.data(), m->nv);
-  if (m->na > 0) mju_copy(d->act, state.act.data(), m->na);
-  mj_forward(m, d);
-  std::vector<adroit_mpc::TaskEvent> events;
-  {
-    std::lock_guard<std::mutex> lock(task_mutex_);
-    events = live_task_->observe(m, d, state.time);
-    // A switched task or another horizon: re-initialise (allocates; only on such a change).
-    if (task_switched_ || pending_horizon_) {
-      if (pending_horizon_) params_.settings.horizon = *pending_horizon_;
-      pending_horizon_.reset();
-      task_switched_ = false;
-      planner_->initialize(m, *live_task_, params_.settings);
-      horizon_ = params_.settings.horizon;
-    }
-    planner_->setTask(*live_task_);
-  }
-  if (!events.empty()) publishEvents(events);
-  // Observed on the measured state above; planned from where the running policy will have
-  // taken the robot when this plan takes over (0 in lockstep: the world waits).
-  const double compensated = params_.latency_compensation && have_running_policy_
-                                 ? predictor_.predict(running_policy_, params_.feedback_scale, latency_.expected(),
-                                                      planner_state_)
-                                 : 0.0;
-  planner_->setState(planner_state_);
-
-  const adroit_mpc::OptimizeReport report = planner_->optimize();
-  solves_.fetch_add(1, std::memory_order_relaxed);
-  {
-    std::lock_guard<std::mutex> lock(stats_mutex_);
-    Window& w = window_;
-    w.sum.rollout += report.rollout, w.sum.derivatives += report.derivatives, w.sum.cost += report.cost;
-    w.sum.backward += report.backward, w.sum.line_search += report.line_search, w.sum.total += report.total;
-    w.total_max = std::max(w.total_max, report.total);
-    ++w.solves;
-    last_report_ = report;
-  }
-  if (report.diverged || !std::isfinite(report.cost_after)) {
-    // Never published; the planner has gone back to its safe warm start (reset() again in
-    // case it only reported a non-finite cost).
-    if (!report.diverged) planner_->reset();
-    diverged_.fetch_add(1, std::memory_order_relaxed);
+  if (!runner_->planOnce(planner_state_).published) {
     ROS_WARN_THROTTLE(1.0, "adroit_mpc: solve diverged (non-finite cost); plan reset to the warm start, not published");
     return false;
   }
-  planner_->policy(policies_.back());
-  policies_.publish();
-  if (params_.latency_compensation) {  // a copy per plan (~0.5 MB for typing): only when used
-    planner_->policy(running_policy_);
-    have_running_policy_ = true;
-  }
-  const double latency = nodeTime(ros::Time::now()) - state.time;  // on the robot's clock
-  latency_.record(latency);
-  {
-    std::lock_guard<std::mutex> lock(stats_mutex_);
-    window_.latency_sum += latency;
-    window_.compensated_sum += compensated;
-  }
-  policies_published_.fetch_add(1, std::memory_order_relaxed);
   if (markers_wanted_.load(std::memory_order_relaxed)) takeMarkerSnapshot();
   return true;
 }
@@ -258,8 +202,7 @@ void MpcNode::enterOptimiserThread() {
     std::string error;
     if (!adroit::setThreadNice(params_.nice, &error)) ROS_WARN("adroit_mpc: ~nice %d: %s", params_.nice, error.c_str());
   }
-  std::lock_guard<std::mutex> lock(task_mutex_);
-  planner_->initialize(model_.get(), *live_task_, params_.settings);
+  runner_->initializePlanner();
 }
 
 void MpcNode::plannerLoop() {
@@ -287,33 +230,20 @@ void MpcNode::publishEvents(const std::vector<adroit_mpc::TaskEvent>& events) {
 
 // --- control ---------------------------------------------------------------------------------
 
-bool MpcNode::policyUsable(double t, double* age) const {
-  // A policy older than its horizon says nothing about now (after a stall): send nothing.
-  *age = t - policies_.front().policy.t0;
-  return *age <= horizon_.load(std::memory_order_relaxed);
-}
-
 bool MpcNode::sendCommand(double t, const StateSnapshot& state) {
   double age = 0;
-  if (!policyUsable(t, &age)) return false;
+  // A policy older than its horizon says nothing about now (after a stall): send nothing.
+  if (!runner_->usable(t, &age)) return false;
   if (!(params_.force_mode ? sendForces(t, state) : sendPolicyReference(t, state))) return false;
   publishing_ = true;
-  std::unique_lock<std::mutex> lock(stats_mutex_, std::try_to_lock);  // never waits
-  if (lock.owns_lock()) {
-    window_.age_sum += age;
-    window_.age_max = std::max(window_.age_max, age);
-    ++window_.age_samples;
-  }
+  runner_->recordPolicyAge(age);
   return true;
 }
 
 bool MpcNode::sendForces(double t, const StateSnapshot& state) {
-  policies_.front().action(t, state.qpos.data(), state.qvel.data(), state.act.data(), ctrl_.data(),
-                           params_.feedback_scale);
-  for (std::size_t i = 0; i < ctrl_.size(); ++i) {
-    if (!std::isfinite(ctrl_[i])) return false;  // the driver would reject it
-    force_msg_.force[i] = std::max(0.0, ctrl_[i]);
-  }
+  // False also for a non-finite control: the driver would reject it.
+  if (!runner_->action(t, state.qpos.data(), state.qvel.data(), state.act.data(), ctrl_.data())) return false;
+  for (std::size_t i = 0; i < ctrl_.size(); ++i) force_msg_.force[i] = std::max(0.0, ctrl_[i]);
   force_msg_.header.stamp = rosTime(t);
   force_pub_.publish(force_msg_);
   commands_sent_.fetch_add(1, std::memory_order_relaxed);
@@ -323,16 +253,15 @@ bool MpcNode::sendForces(double t, const StateSnapshot& state) {
 bool MpcNode::sendPolicyReference(double t, const StateSnapshot& state) {
   // The pools track the future, not just the present (thesis 7.4): the policy from now to its
   // horizon's end, with the feedback on the deviation measured now (PlanPolicy::reference).
-  const adroit_mpc::PlanPolicy& plan = policies_.front();
   const std::size_t nu = actuator_names_.size();
   const int max_samples = static_cast<int>(reference_values_.size() / nu);
-  const int samples = plan.reference(t, state.qpos.data(), state.qvel.data(), state.act.data(), max_samples,
-                                     reference_values_.data(), params_.feedback_scale);
+  // 0 also for a non-finite value: the pools would reject it.
+  const int samples = runner_->reference(t, state.qpos.data(), state.qvel.data(), state.act.data(), max_samples,
+                                         reference_values_.data());
+  if (samples == 0) return false;
   const std::size_t n = static_cast<std::size_t>(samples) * nu;
-  for (std::size_t i = 0; i < n; ++i)
-    if (!std::isfinite(reference_values_[i])) return false;  // the pools would reject it
   reference_msg_.header.stamp = rosTime(t);
-  reference_msg_.dt = plan.policy.dt;
+  reference_msg_.dt = runner_->policy().policy.dt;
   reference_msg_.steps = static_cast<std::uint32_t>(samples);
   reference_msg_.force.resize(n);  // within the reserved capacity: no allocation
   for (std::size_t i = 0; i < n; ++i) reference_msg_.force[i] = std::max(0.0, reference_values_[i]);
@@ -369,8 +298,8 @@ void MpcNode::controlLoop() {
       }
       continue;
     }
-    policies_.update();
-    if (!policies_.hasPolicy() || !latestState(control_state_)) continue;
+    runner_->updatePolicy(nodeTime(ros::Time::now()));
+    if (!runner_->hasPolicy() || !latestState(control_state_)) continue;
     sendCommand(nodeTime(ros::Time::now()), control_state_);
   }
 }
@@ -437,7 +366,7 @@ void MpcNode::lockstepLoop() {
       }
     }
     planOnce(plan_state_);
-    policies_.update();
+    runner_->updatePolicy(plan_state_.time);  // the world waited: the plan takes over now
     control_state_.time = plan_state_.time;
     control_state_.object_time = plan_state_.object_time;
     control_state_.serial = plan_state_.serial;
@@ -448,7 +377,7 @@ void MpcNode::lockstepLoop() {
       // The command travels on its own topic: the driver steps once it has arrived.
       // Pneumatic mode: the reference goes to the pools, whose valve commands the driver
       // does not wait for.
-      const bool sent = policies_.hasPolicy() && sendCommand(control_state_.time, control_state_);
+      const bool sent = runner_->hasPolicy() && sendCommand(control_state_.time, control_state_);
       const bool wait = sent && params_.force_mode;
       if (!callStep(static_cast<std::uint32_t>(steps_per_control), wait ? control_state_.time : -1, &sim_time) ||
           !waitForState(sim_time, control_state_)) {

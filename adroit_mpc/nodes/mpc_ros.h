@@ -9,11 +9,12 @@
 //  * state queue (1 spinner): joint states and odometry, validated and copied into the state
 //    store (a few hundred numbers under state_mutex_);
 //  * default queue (1 spinner): services, goal topics, reconfigure, markers, diagnostics;
-//  * planner thread: latest state -> observe/setTask (under task_mutex_) -> optimize ->
-//    (not diverged) the policy into the back slot of a triple buffer, published lock-free;
-//    pneumatic mode: the best trajectory's forces to the pools;
-//  * control thread (force mode): at control_rate evaluates the newest policy on the newest
-//    state and sends tendon forces; it never waits for the optimiser;
+//  * planner thread: latest state -> the runner's MPC side (adroit_mpc/mpc_runner.h: observe /
+//    setTask under its task mutex, optional latency compensation, optimize, a good policy
+//    published lock-free);
+//  * control thread: at control_rate the runner's control side evaluates the newest policy on
+//    the newest state: tendon forces (force mode) or the force reference for the pools
+//    (pneumatic mode); it never waits for the optimiser;
 //  * lockstep (tests, benchmarks): one thread optimises, then steps the paused driver one
 //    control period at a time through /adroit/step, so closed-loop runs are deterministic.
 #pragma once
@@ -21,7 +22,6 @@
 #include <ros/callback_queue.h>
 #include <ros/ros.h>
 
-#include <array>
 #include <atomic>
 #include <map>
 #include <memory>
@@ -47,7 +47,7 @@
 #include "adroit_core/mujoco_model.h"
 #include "adroit_core/pi_mutex.h"
 #include "adroit_mpc/MpcConfig.h"
-#include "adroit_mpc/latency_compensation.h"
+#include "adroit_mpc/mpc_runner.h"
 #include "adroit_mpc/planner.h"
 #include "adroit_mpc/task.h"
 #include "adroit_ros/diagnostics.h"
@@ -97,34 +97,6 @@ struct StateSnapshot {
   std::uint64_t serial = 0;  // joint states accepted so far
 };
 
-// Three PlanPolicy slots: the planner fills the back one and swaps it with the middle one
-// (an atomic exchange); the control side takes the middle one when it is newer. Neither
-// side ever waits for the other, and no slot is read while it is written.
-class PolicyExchange {
- public:
-  void bind(const mjModel* model) {
-    for (auto& s : slots_) s.bind(model);
-  }
-  adroit_mpc::PlanPolicy& back() { return slots_[back_]; }
-  void publish() { back_ = middle_.exchange(back_ | kFresh) & kIndex; }
-  // True when a newer policy was taken into front().
-  bool update() {
-    if (!(middle_.load() & kFresh)) return false;
-    front_ = middle_.exchange(front_) & kIndex;
-    has_front_ = true;
-    return true;
-  }
-  bool hasPolicy() const { return has_front_; }
-  const adroit_mpc::PlanPolicy& front() const { return slots_[front_]; }
-
- private:
-  static constexpr int kIndex = 3, kFresh = 4;
-  std::array<adroit_mpc::PlanPolicy, 3> slots_;
-  int back_ = 0, front_ = 1;  // owned by the planner / the control side
-  std::atomic<int> middle_{2};
-  bool has_front_ = false;
-};
-
 class MpcNode {
  public:
   // Throws ParameterError (or std::exception) with one line to report.
@@ -159,11 +131,12 @@ class MpcNode {
   double stateAgeWall() const;  // wall s since the last accepted joint state (inf: none)
 
   // --- planning and control (mpc_ros.cpp) ---
+  adroit_mpc::RunnerSettings runnerSettings();  // real time on the node's clock, the ~parameters
   void enterOptimiserThread();  // ~nice for this thread, then the planner (re)started from it
   void plannerLoop();
   void controlLoop();
   void lockstepLoop();
-  // One optimisation on `state`; true when a new policy was published.
+  // One optimisation on `state` (the runner's MPC side); true when a new policy was published.
   bool planOnce(const StateSnapshot& state);
   // The current policy on `state` at time t: tendon forces (force mode) or the force
   // reference over the rest of its horizon for the pools (pneumatic mode). False when
@@ -171,7 +144,6 @@ class MpcNode {
   bool sendCommand(double t, const StateSnapshot& state);
   bool sendForces(double t, const StateSnapshot& state);
   bool sendPolicyReference(double t, const StateSnapshot& state);
-  bool policyUsable(double t, double* age) const;
   // command_time >= 0: the driver steps once the command stamped then has arrived.
   bool callStep(std::uint32_t steps, double command_time, double* sim_time);
   bool waitForState(double sim_time, StateSnapshot& out);
@@ -225,24 +197,13 @@ class MpcNode {
   rosutil::RejectionCounters rejections_;
   std::string last_rejection_;  // default queue / state queue, logged text (under state_mutex_)
 
-  // Planner (planner thread, except under task_mutex_ for the hand-overs).
-  std::unique_ptr<adroit_mpc::Planner> planner_;
-  std::mutex task_mutex_;
-  std::unique_ptr<adroit_mpc::Task> live_task_;      // the node's copy: commands, observe
-  bool task_switched_ = false;                       // set_task replaced live_task_: re-initialise
-  std::optional<double> pending_horizon_;            // reconfigure asked for another horizon
+  // The closed loop: planner, live task, policy exchange, latency compensation, statistics.
+  // The live task and the members below are changed under runner_->taskMutex().
+  std::unique_ptr<adroit_mpc::MpcRunner> runner_;
   std::string task_name_;
   std::optional<geometry_msgs::Pose> goal_;          // last accepted goal (markers)
-  DataPtr observe_data_;
-  StateSnapshot plan_state_;
-  adroit_mpc::PlannerState planner_state_;
-  PolicyExchange policies_;
-  // Latency compensation (planner thread): the policy the control side runs, the latency
-  // from a state's stamp to its plan's publication, the prediction.
-  adroit_mpc::PlanPolicy running_policy_;
-  bool have_running_policy_ = false;
-  adroit_mpc::LatencyEstimate latency_;
-  adroit_mpc::StatePredictor predictor_;
+  StateSnapshot plan_state_;                         // planner thread
+  adroit_mpc::PlannerState planner_state_;           // plan_state_ as the runner takes it
 
   // Control (control thread or lockstep loop).
   StateSnapshot control_state_;
@@ -260,21 +221,8 @@ class MpcNode {
   Config reconfigure_config_;
   bool reconfigure_ready_ = false;
 
-  // Statistics of the diagnostics window (stats_mutex_).
-  struct Window {
-    adroit_mpc::OptimizeReport sum;  // summed times
-    double total_max = 0;
-    int solves = 0;
-    double age_sum = 0, age_max = 0;
-    int age_samples = 0;
-    double latency_sum = 0, compensated_sum = 0;  // state stamp to publication; predicted over
-  };
-  std::mutex stats_mutex_;
-  Window window_;
-  adroit_mpc::OptimizeReport last_report_;
-  std::atomic<std::uint64_t> solves_{0}, diverged_{0}, policies_published_{0}, commands_sent_{0},
-      references_sent_{0}, stale_stops_{0}, lockstep_failures_{0};
-  std::atomic<double> horizon_{0};        // s, the planner's current horizon (control side reads it)
+  // Counters of the diagnostics (the runner keeps the planning ones).
+  std::atomic<std::uint64_t> commands_sent_{0}, references_sent_{0}, stale_stops_{0}, lockstep_failures_{0};
   std::atomic<bool> publishing_{false};  // control output active (fresh state, a policy)
 
   // Marker snapshot of the best trajectory (marker_mutex_; the planner only try-locks).

@@ -70,8 +70,8 @@ bool MpcNode::onSetTask(adroit_msgs::SetTask::Request& req, adroit_msgs::SetTask
     }
   }
   {
-    std::lock_guard<std::mutex> lock(task_mutex_);
-    adroit_mpc::Task& target = fresh ? *fresh : *live_task_;
+    std::lock_guard<std::mutex> lock(runner_->taskMutex());
+    adroit_mpc::Task& target = fresh ? *fresh : runner_->task();
     // Goal and keys are checked on the target before anything changes.
     if (isGiven(req.goal) && !applyGoalTo(target, req.goal, &why)) {
       rejections_.count(kGoal);
@@ -86,8 +86,7 @@ bool MpcNode::onSetTask(adroit_msgs::SetTask::Request& req, adroit_msgs::SetTask
       return true;
     }
     if (fresh) {
-      live_task_ = std::move(fresh);
-      task_switched_ = true;
+      runner_->replaceTask(std::move(fresh));  // the planner is re-initialised at its next plan
       task_name_ = req.task;
     }
     if (isGiven(req.goal)) goal_ = req.goal;
@@ -101,8 +100,8 @@ bool MpcNode::onSetTask(adroit_msgs::SetTask::Request& req, adroit_msgs::SetTask
 
 bool MpcNode::onRelease(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
   std::string why;
-  std::lock_guard<std::mutex> lock(task_mutex_);
-  res.success = live_task_->release(&why);
+  std::lock_guard<std::mutex> lock(runner_->taskMutex());
+  res.success = runner_->task().release(&why);
   res.message = res.success ? "released" : why;
   if (!res.success) rejections_.count(kTaskCommand);
   return true;
@@ -112,8 +111,8 @@ bool MpcNode::applyGoal(const geometry_msgs::Pose& pose, const std::string& fram
   if (!frame.empty() && frame != "world") {
     *why = "goal frame '" + frame + "', expected 'world'";
   } else {
-    std::lock_guard<std::mutex> lock(task_mutex_);
-    if (applyGoalTo(*live_task_, pose, why)) {
+    std::lock_guard<std::mutex> lock(runner_->taskMutex());
+    if (applyGoalTo(runner_->task(), pose, why)) {
       goal_ = pose;
       return true;
     }
@@ -136,8 +135,8 @@ void MpcNode::onGoal(const geometry_msgs::PoseStamped::ConstPtr& msg) {
 
 void MpcNode::onType(const std_msgs::String::ConstPtr& msg) {
   std::string why;
-  std::lock_guard<std::mutex> lock(task_mutex_);
-  if (!live_task_->setSequence(msg->data, &why)) {
+  std::lock_guard<std::mutex> lock(runner_->taskMutex());
+  if (!runner_->task().setSequence(msg->data, &why)) {
     rejections_.count(kTaskCommand);
     ROS_ERROR_THROTTLE(1.0, "adroit_mpc: key sequence rejected: %s", why.c_str());
   }
@@ -209,7 +208,7 @@ void MpcNode::onGoalMarker(const visualization_msgs::InteractiveMarkerFeedbackCo
   ROS_ERROR("adroit_mpc: goal rejected: %s", why.c_str());
   geometry_msgs::Pose back;
   {
-    std::lock_guard<std::mutex> lock(task_mutex_);
+    std::lock_guard<std::mutex> lock(runner_->taskMutex());
     if (!goal_) return;
     back = *goal_;
   }
@@ -222,23 +221,24 @@ void MpcNode::onReconfigure(Config& config, uint32_t) {
   if (!reconfigure_ready_) return;  // the server's first call: syncReconfigure sets the values
   dynamic_reconfigure::Config values;
   config.__toMessage__(values);
-  std::lock_guard<std::mutex> lock(task_mutex_);
-  const std::vector<std::string> weights = live_task_->weightNames();
+  std::lock_guard<std::mutex> lock(runner_->taskMutex());
+  adroit_mpc::Task& task = runner_->task();
+  const std::vector<std::string> weights = task.weightNames();
   for (const auto& p : values.doubles) {
     if (p.name == "horizon") {
-      if (std::abs(p.value - params_.settings.horizon) > 1e-12) {
+      if (std::abs(p.value - runner_->horizon()) > 1e-12) {
         if (p.value < 2 * params_.settings.dt) {
           ROS_ERROR("adroit_mpc: reconfigure: horizon %g s is shorter than two knots", p.value);
           continue;
         }
-        pending_horizon_ = p.value;
+        runner_->setHorizon(p.value);  // the planner is re-initialised at its next plan
       }
       continue;
     }
     if (std::find(weights.begin(), weights.end(), p.name) == weights.end()) continue;  // another task's weight
-    if (live_task_->weight(p.name) == p.value) continue;
+    if (task.weight(p.name) == p.value) continue;
     try {
-      live_task_->setWeight(p.name, p.value);
+      task.setWeight(p.name, p.value);
       ROS_INFO("adroit_mpc: %s = %g", p.name.c_str(), p.value);
     } catch (const std::exception& e) {
       ROS_ERROR("adroit_mpc: reconfigure: %s", e.what());
@@ -253,14 +253,14 @@ void MpcNode::syncReconfigure() {
   dynamic_reconfigure::Config values;
   config.__toMessage__(values);
   {
-    std::lock_guard<std::mutex> lock(task_mutex_);
+    std::lock_guard<std::mutex> lock(runner_->taskMutex());
     for (auto& p : values.doubles) {
       if (p.name == "horizon") {
-        p.value = pending_horizon_ ? *pending_horizon_ : params_.settings.horizon;
+        p.value = runner_->horizon();
         continue;
       }
-      const std::vector<std::string> weights = live_task_->weightNames();
-      if (std::find(weights.begin(), weights.end(), p.name) != weights.end()) p.value = live_task_->weight(p.name);
+      const std::vector<std::string> weights = runner_->task().weightNames();
+      if (std::find(weights.begin(), weights.end(), p.name) != weights.end()) p.value = runner_->task().weight(p.name);
     }
   }
   config.__fromMessage__(values);

@@ -3,7 +3,7 @@
 // against predictive sampling, synergies on / off, force against pneumatic mode, on identical
 // trials. A program, not a test.
 //
-//   mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned,nocomp,coldfd]
+//   mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,cem,cem_pneumatic,nosyn,pneumatic,pneumatic_open,as_planned,nocomp,coldfd]
 //               [--out DIR] [--seed S] [--only-trial K] [--fixed-latency S] [--latency-sweep S,S,...]
 //               [--dt S] [--horizon S] [--skip K] [--sensed] [--feedback-scale F] [--contact M,S] [--events]
 //               [--idle S]
@@ -46,8 +46,8 @@
 //
 // Closed loop in emulated real time, ROS-free, against the simulation driver's core
 // (adroit_driver::SimulatedRobot: the physical scene in 2 ms steps, the pneumatic plant,
-// sensors, watchdog). Variants ilqg, sampling, nosyn drive it in force mode (the policy's
-// tendon forces every step); pneumatic is iLQG with the plan's tensions over the horizon
+// sensors, watchdog). Variants ilqg, sampling, cem, nosyn drive it in force mode (the policy's
+// tendon forces every step); pneumatic (cem_pneumatic: CEM) is iLQG with the plan's tensions over the horizon
 // sent to a pool of every cylinder (adroit_pneumatics::CylinderPool, iLQG pressure control
 // at 200 Hz on the sensed pressures, config/pools.yaml settings, identified models), whose
 // valve commands drive the plant, as the node does in mode:=pneumatic. The pools' CPU time
@@ -881,6 +881,8 @@ int main(int argc, char** argv) {
   }
   const std::map<std::string, Variant> known = {{"ilqg", {"ilqg", "ilqg", true}},
                                                 {"sampling", {"sampling", "sampling", true}},
+                                                {"cem", {"cem", "cem", true}},
+                                                {"cem_pneumatic", {"cem_pneumatic", "cem", true, true}},
                                                 {"nosyn", {"nosyn", "ilqg", false}},
                                                 {"pneumatic", {"pneumatic", "ilqg", true, true}},
                                                 {"pneumatic_open", {"pneumatic_open", "ilqg", true, true, true}},
@@ -890,7 +892,7 @@ int main(int argc, char** argv) {
   std::vector<Variant> variants;
   for (const auto& v : split(variants_arg)) {
     if (!known.count(v)) {
-      std::fprintf(stderr, "mpc_success: unknown variant '%s' (known: ilqg, sampling, nosyn, pneumatic, pneumatic_open, as_planned, nocomp, coldfd)\n", v.c_str());
+      std::fprintf(stderr, "mpc_success: unknown variant '%s' (known: ilqg, sampling, cem, cem_pneumatic, nosyn, pneumatic, pneumatic_open, as_planned, nocomp, coldfd)\n", v.c_str());
       return 2;
     }
     variants.push_back(known.at(v));

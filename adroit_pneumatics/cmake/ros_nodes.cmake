@@ -3,10 +3,10 @@
 # audit, and their tests.
 # Included at the end of CMakeLists.txt (after catkin_package and the core target).
 
-# ROS-free: CylinderPool, default pool split, model cylinder table (adroit_description's
-# library, no ROS library).
+# ROS-free: CylinderPool, PoolGroup, default pool split, model cylinder table
+# (adroit_description's library, no ROS library).
 find_package(catkin REQUIRED COMPONENTS adroit_core adroit_description)
-add_library(adroit_pneumatics_pool src/pool.cpp)
+add_library(adroit_pneumatics_pool src/pool.cpp src/pool_group.cpp)
 target_include_directories(adroit_pneumatics_pool PUBLIC include ${catkin_INCLUDE_DIRS})
 target_link_libraries(adroit_pneumatics_pool PUBLIC adroit_pneumatics_core ${catkin_LIBRARIES})
 
@@ -14,8 +14,9 @@ target_link_libraries(adroit_pneumatics_pool PUBLIC adroit_pneumatics_core ${cat
 find_package(catkin REQUIRED COMPONENTS
   adroit_core adroit_description adroit_msgs adroit_ros roscpp roslib nodelet pluginlib diagnostic_msgs rosbag std_msgs)
 
-# One ROS wrapper class (pool_ros.cpp) behind both the nodelet plugin and the node.
-add_library(adroit_pneumatics_nodelets nodes/pool_ros.cpp nodes/pool_nodelet.cpp)
+# One ROS wrapper class (pool_ros.cpp, a group of one or more pools; its parameters in
+# pool_params.cpp) behind both the nodelet plugin and the node.
+add_library(adroit_pneumatics_nodelets nodes/pool_ros.cpp nodes/pool_params.cpp nodes/pool_nodelet.cpp)
 target_include_directories(adroit_pneumatics_nodelets PRIVATE ${catkin_INCLUDE_DIRS})
 target_link_libraries(adroit_pneumatics_nodelets adroit_pneumatics_pool ${catkin_LIBRARIES})
 add_dependencies(adroit_pneumatics_nodelets ${catkin_EXPORTED_TARGETS})
@@ -53,6 +54,8 @@ if(CATKIN_ENABLE_TESTING)
   target_link_libraries(test_pool adroit_pneumatics_pool GTest::gtest_main)
   # The generated scenes of adroit_description (for the default split on the real model).
   target_compile_definitions(test_pool PRIVATE ADROIT_DESCRIPTION_SHARE="${adroit_description_DIR}/..")
+  catkin_add_gtest(test_pool_group test/test_pool_group.cpp)
+  target_link_libraries(test_pool_group adroit_pneumatics_pool GTest::gtest_main)
   # Its own binary: it replaces the global operator new/delete to count allocations.
   catkin_add_gtest(test_pool_realtime test/test_pool_realtime.cpp)
   target_link_libraries(test_pool_realtime adroit_pneumatics_pool GTest::gtest_main)
@@ -68,4 +71,5 @@ if(CATKIN_ENABLE_TESTING)
   find_package(rostest REQUIRED)
   add_rostest(test/pool.test DEPENDENCIES pool_node)
   add_rostest(test/pool_nodelet.test DEPENDENCIES adroit_pneumatics_nodelets)
+  add_rostest(test/pool_group.test DEPENDENCIES pool_node)
 endif()

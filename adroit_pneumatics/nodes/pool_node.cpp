@@ -1,5 +1,6 @@
-// pool_node: one pneumatic force-abstraction pool as a standalone node (the same class
-// runs as the nodelet adroit_pneumatics/PoolNodelet). Parameters: see README "Pool node".
+// pool_node: one pneumatic force-abstraction pool, or a group of them (~members), as a
+// standalone node (the same class runs as the nodelet adroit_pneumatics/PoolNodelet).
+// Parameters: see README "Pool node".
 #include <exception>
 #include <memory>
 

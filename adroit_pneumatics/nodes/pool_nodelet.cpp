@@ -1,5 +1,5 @@
-// The pool as a nodelet, so pools can share a process (and zero-copy messages) with the
-// driver. A bad configuration logs one fatal line and leaves this nodelet idle rather than
+// The pool (or a group of pools) as a nodelet, so pools can share a process (and zero-copy
+// messages) with the driver. A bad configuration logs one fatal line and leaves this nodelet idle rather than
 // taking down the manager and everything else loaded into it.
 #include <exception>
 #include <memory>

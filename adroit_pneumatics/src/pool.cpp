@@ -50,6 +50,39 @@ const char* rejectReasonName(StateReject reason) {
   return "?";
 }
 
+NameColumns::NameColumns(const std::vector<std::string>& model_names) {
+  model_order_.names = model_names;
+  for (std::size_t k = 0; k < model_names.size(); ++k) {
+    index_.emplace(model_names[k], static_cast<int>(k));
+    model_order_.known.push_back(static_cast<int>(k));
+  }
+}
+
+int NameColumns::find(const std::string& name) const {
+  const auto it = index_.find(name);
+  return it == index_.end() ? -1 : it->second;
+}
+
+const Columns& NameColumns::resolve(const std::vector<std::string>& names) {
+  if (resolved_ && names == last_.names) return last_;  // the stream's usual case: no hashing
+  last_.names = names;
+  last_.known.assign(names.size(), -1);
+  last_.first_unknown = last_.first_duplicate = -1;
+  std::vector<char> seen(model_order_.size(), 0);
+  for (std::size_t j = 0; j < names.size(); ++j) {
+    const int k = find(names[j]);
+    if (k < 0) {
+      if (last_.first_unknown < 0) last_.first_unknown = static_cast<int>(j);
+      continue;
+    }
+    if (seen[k] && last_.first_duplicate < 0) last_.first_duplicate = static_cast<int>(j);
+    seen[k] = 1;
+    last_.known[j] = k;
+  }
+  resolved_ = true;
+  return last_;
+}
+
 void putCommand(CommandSlot& slot, double stamp, const std::vector<double>& volts) {
   PoolCommand& c = slot.back();
   c.stamp = stamp;
@@ -81,43 +114,48 @@ void PoolOptions::validate() const {
 CylinderPool::CylinderPool(std::vector<PoolCylinder> cylinders, std::vector<std::string> known_names,
                            const PoolOptions& options)
     : cylinders_(std::move(cylinders)), known_names_(std::move(known_names)), options_(options),
+      state_columns_(known_names_), reference_columns_(known_names_),
       plan_box_(std::vector<Plan>(cylinders_.size())), state_box_(std::vector<State>(cylinders_.size())) {
   options_.validate();
+  ilqg_ = options_.controller == "ilqg";
   if (cylinders_.empty()) throw std::invalid_argument("pool has no cylinders");
-  for (std::size_t k = 0; k < known_names_.size(); ++k) known_index_.emplace(known_names_[k], k);
   slot_of_known_.assign(known_names_.size(), -1);
   for (std::size_t i = 0; i < cylinders_.size(); ++i) {
     const PoolCylinder& c = cylinders_[i];
-    const auto it = known_index_.find(c.name);
-    if (it == known_index_.end()) throw std::invalid_argument("unknown cylinder '" + c.name + "'");
-    if (slot_of_known_[it->second] >= 0) throw std::invalid_argument("cylinder '" + c.name + "' listed twice");
+    const int known = state_columns_.find(c.name);
+    if (known < 0) throw std::invalid_argument("unknown cylinder '" + c.name + "'");
+    if (slot_of_known_[known] >= 0) throw std::invalid_argument("cylinder '" + c.name + "' listed twice");
     if (!(c.bore_area > 0) || !(c.dead_volume > 0))
       throw std::invalid_argument("cylinder '" + c.name + "' needs bore_area > 0 and dead_volume > 0");
     c.model.validate();
-    slot_of_known_[it->second] = static_cast<int>(i);
+    slot_of_known_[known] = static_cast<int>(i);
     names_.push_back(c.name);
     const ParametricModel model(c.model);
-    if (options_.controller == "ilqg")
+    if (ilqg_)
       controllers_.push_back(std::make_unique<IlqgPressureController>(model, options_.ilqg, options_.solve_every));
     else
       controllers_.push_back(std::make_unique<PidfController>(model, options_.pidf));
   }
   input_plans_.resize(size());
   input_states_.resize(size());
-  seen_.assign(known_names_.size(), 0);
   ours_.reserve(size());
   valve_index_.assign(size(), -1);
   expired_serial_.assign(size(), 0);
   active_.assign(size(), 0);
   commands_.assign(size(), options_.exhaust_volts);
   // The iLQG horizon needs horizon + 1 reference samples; PIDF uses only the first.
-  ref_buffer_.resize(options_.controller == "ilqg" ? options_.ilqg.horizon + 1 : 1);
+  ref_buffer_.resize(ilqg_ ? options_.ilqg.horizon + 1 : 1);
   // Room for 20 s of ticks at 200 Hz between two takeWindow() calls; beyond, samples drop.
   window_solve_.reserve(4096);
 }
 
 Verdict CylinderPool::setReference(double now, double t0, double dt, std::size_t steps,
                                    const std::vector<std::string>& names, const std::vector<double>& force) {
+  return setResolvedReference(now, t0, dt, steps, reference_columns_.resolve(names), force);
+}
+
+Verdict CylinderPool::setResolvedReference(double now, double t0, double dt, std::size_t steps,
+                                           const Columns& columns, const std::vector<double>& force) {
   if (!std::isfinite(t0)) return reject(RejectReason::kTiming, "reference stamp is not finite");
   if (steps == 0) return reject(RejectReason::kLength, "reference has 0 steps");
   if (steps > 1 && !(dt > 0 && std::isfinite(dt))) return reject(RejectReason::kTiming, "reference dt must be > 0");
@@ -133,21 +171,20 @@ Verdict CylinderPool::setReference(double now, double t0, double dt, std::size_t
     return reject(RejectReason::kStampPast, "reference ended " + std::to_string(now - end) +
                                                 " s before the pool's clock (stamp_tolerance " + std::to_string(tol) +
                                                 " s)");
-  if (names.empty()) return reject(RejectReason::kLength, "reference names no cylinders");
-  if (force.size() != steps * names.size())
+  const std::size_t width = columns.size();
+  if (width == 0) return reject(RejectReason::kLength, "reference names no cylinders");
+  if (force.size() != steps * width)
     return reject(RejectReason::kLength, "reference has " + std::to_string(force.size()) + " forces, expected steps " +
-                                             std::to_string(steps) + " x names " + std::to_string(names.size()));
+                                             std::to_string(steps) + " x names " + std::to_string(width));
   if (!allFinite(force)) return reject(RejectReason::kNonFinite, "reference contains NaN or Inf");
   ours_.clear();
-  ++seen_mark_;
-  for (std::size_t j = 0; j < names.size(); ++j) {
-    const auto it = known_index_.find(names[j]);
-    if (it == known_index_.end())
-      return reject(RejectReason::kUnknownName, "reference names unknown cylinder '" + names[j] + "'");
-    if (seen_[it->second] == seen_mark_)
-      return reject(RejectReason::kDuplicateName, "reference names cylinder '" + names[j] + "' twice");
-    seen_[it->second] = seen_mark_;
-    if (slot_of_known_[it->second] >= 0) ours_.emplace_back(slot_of_known_[it->second], j);
+  for (std::size_t j = 0; j < width; ++j) {
+    const int known = columns.known[j];
+    if (known < 0)
+      return reject(RejectReason::kUnknownName, "reference names unknown cylinder '" + columns.names[j] + "'");
+    if (static_cast<int>(j) == columns.first_duplicate)
+      return reject(RejectReason::kDuplicateName, "reference names cylinder '" + columns.names[j] + "' twice");
+    if (slot_of_known_[known] >= 0) ours_.emplace_back(slot_of_known_[known], j);
   }
   Verdict verdict;
   if (ours_.empty()) {
@@ -167,7 +204,7 @@ Verdict CylinderPool::setReference(double now, double t0, double dt, std::size_t
     // chamber cannot reach, so it is clamped to zero tension (and reported: the driver
     // rejects negative tensions, a planner sending them has a bug worth seeing).
     for (std::size_t k = 0; k < steps; ++k) {
-      const double f = force[k * names.size() + col];
+      const double f = force[k * width + col];
       if (f < 0) verdict.clamped_negative = true;
       plan.pressure[k] = options_.atmosphere + std::max(0.0, f) / cylinders_[slot].bore_area;
     }
@@ -180,6 +217,13 @@ Verdict CylinderPool::setReference(double now, double t0, double dt, std::size_t
 StateVerdict CylinderPool::setState(double now, double stamp, const std::vector<std::string>& names,
                                     const std::vector<double>& pressure, const std::vector<double>& length,
                                     const std::vector<double>& length_rate, double supply) {
+  const Columns& columns = names.empty() ? state_columns_.modelOrder() : state_columns_.resolve(names);
+  return setResolvedState(now, stamp, columns, pressure, length, length_rate, supply);
+}
+
+StateVerdict CylinderPool::setResolvedState(double now, double stamp, const Columns& columns,
+                                            const std::vector<double>& pressure, const std::vector<double>& length,
+                                            const std::vector<double>& length_rate, double supply) {
   StateVerdict verdict;
   auto bad = [&verdict](StateReject reason, std::string detail) {
     verdict.reason = reason;
@@ -193,7 +237,7 @@ StateVerdict CylinderPool::setState(double now, double stamp, const std::vector<
   if (now - stamp > options_.state_timeout)
     return bad(StateReject::kStale, "actuator state stamped " + std::to_string(now - stamp) +
                                         " s ago (state_timeout " + std::to_string(options_.state_timeout) + " s)");
-  const std::size_t n = names.empty() ? known_names_.size() : names.size();
+  const std::size_t n = columns.size();
   if (pressure.size() != n)
     return bad(StateReject::kLength, "actuator state has " + std::to_string(pressure.size()) + " pressures for " +
                                          std::to_string(n) + " cylinders");
@@ -202,21 +246,13 @@ StateVerdict CylinderPool::setState(double now, double stamp, const std::vector<
     return bad(StateReject::kLength, "actuator state length_rate[] has the wrong size");
   if (!std::isfinite(supply)) return bad(StateReject::kNonFinite, "actuator state supply pressure is not finite");
   // Validate every entry before touching any state, so a bad message changes nothing.
+  verdict.unknown_names = columns.first_unknown >= 0;  // another model's cylinders: skipped, reported
   ours_.clear();
-  ++seen_mark_;
   for (std::size_t j = 0; j < n; ++j) {
-    std::size_t known = j;
-    if (!names.empty()) {
-      const auto it = known_index_.find(names[j]);
-      if (it == known_index_.end()) {
-        verdict.unknown_names = true;  // another model's cylinder: skipped, reported
-        continue;
-      }
-      known = it->second;
-      if (seen_[known] == seen_mark_)
-        return bad(StateReject::kDuplicateName, "actuator state names '" + names[j] + "' twice");
-      seen_[known] = seen_mark_;
-    }
+    if (static_cast<int>(j) == columns.first_duplicate)
+      return bad(StateReject::kDuplicateName, "actuator state names '" + columns.names[j] + "' twice");
+    const int known = columns.known[j];
+    if (known < 0) continue;
     const int slot = slot_of_known_[known];
     if (slot < 0) continue;
     const double x = length.empty() ? 0.0 : length[j], xd = length_rate.empty() ? 0.0 : length_rate[j];
@@ -264,9 +300,8 @@ const std::vector<double>& CylinderPool::update(double now) {
   double solve_seconds = 0;
   bool driven = false, deferred = false;
   std::size_t next_first = first_;
-  const bool ilqg = options_.controller == "ilqg";
-  const double dt_ctrl = ilqg ? options_.ilqg.dt : 0.005;
-  const bool budgeted = ilqg && options_.solve_budget > 0;
+  const double dt_ctrl = ilqg_ ? options_.ilqg.dt : 0.005;
+  const bool budgeted = ilqg_ && options_.solve_budget > 0;
   const Stopwatch tick_watch;
   for (std::size_t k = 0; k < size(); ++k) {
     const std::size_t i = (first_ + k) % size();

@@ -1,15 +1,19 @@
 #!/usr/bin/python3
-"""Integration test of pool_node (or the pool nodelet) against a real roscore.
+"""Integration test of pool_node (or the pool nodelet), one pool or a group, against a real
+roscore.
 
 The test node plays the driver: it publishes /adroit/actuator_states at 200 Hz from a
 first-order pressure response to the valve commands the pool sends (so the loop closes)
 and force references as the behaviour MPC would. It checks that the pool commands exactly
-its cylinders at 200 Hz with finite values in [-5, 5], by index into the actuator-state
-order, tracks the reference, rejects bad references (NaN, wrong length, unknown name, stamps
-far from the clock) and stale actuator states, each counted by reason in /adroit/diagnostics,
-counts negative forces it clamps, keeps commanding from the last valid plan, exhausts after
-the reference timeout, and that a bad configuration stops the node with one line naming the
-field.
+its cylinders at its rate (~rate: one message per tick) with finite values in [-5, 5], by
+index into the actuator-state order, tracks the reference, rejects bad references (NaN,
+wrong length, unknown name, stamps far from the clock) and stale actuator states, each
+counted by reason in /adroit/diagnostics, counts negative forces it clamps, keeps commanding
+from the last valid plan, exhausts after the reference timeout, and that a bad configuration
+stops the node with one line naming the field. For a group (~members: [status name,
+cylinders] per pool) ~pool is every cylinder of the group: one command per tick carries them
+all, when the states stop every cylinder of every pool exhausts, and each pool reports its
+own status.
 """
 import math
 import os
@@ -54,6 +58,9 @@ class PoolTest(unittest.TestCase):
         cls.bores = [math.pi * d * d / 4 for d in rospy.get_param("~bore_diameter")]
         cls.timeout = rospy.get_param("~reference_timeout")
         cls.tick_phase = rospy.get_param("~tick_phase", 0.0)
+        cls.rate = rospy.get_param("~rate", RATE)  # the pool's valve commands (the states stay at RATE)
+        cls.members = rospy.get_param("~members", [])  # a group: [status name, its cylinders] per pool
+        cls.states_paused = False  # the driver falls silent (a stale state)
         # Cylinders of other pools: their states (NaN!) and references must not disturb this pool.
         cls.others = ["A_MFJ2_flex", "A_THJ1_ext"]
         cls.state_names = cls.pool + cls.others  # the order valve command indices refer to
@@ -98,6 +105,9 @@ class PoolTest(unittest.TestCase):
                 cls.plant.step(now - last)
                 p = list(cls.plant.p)
             last = now
+            if cls.states_paused:
+                rate.sleep()
+                continue
             msg = ActuatorStates()
             msg.header.stamp = rospy.Time.now()
             msg.name = cls.state_names
@@ -129,8 +139,8 @@ class PoolTest(unittest.TestCase):
         with self.lock:
             return [m for (t, m) in self.commands if t0 <= t <= t1]
 
-    def latest_status(self):
-        name = rospy.get_param("~pool_name", "/pool_test")
+    def latest_status(self, name=None):
+        name = name or rospy.get_param("~pool_name", "/pool_test")
         with self.lock:
             mine = [s for s in self.diagnostics if s.name == name]
         return mine[-1] if mine else None
@@ -165,12 +175,12 @@ class PoolTest(unittest.TestCase):
         stamps = [m.header.stamp.to_sec() for m in window]
         rate = (len(stamps) - 1) / (stamps[-1] - stamps[0])
         rospy.loginfo("valve command rate %.2f Hz over %d messages", rate, len(stamps))
-        self.assertAlmostEqual(rate, RATE, delta=0.05 * RATE)
+        self.assertAlmostEqual(rate, self.rate, delta=0.05 * self.rate)
         gaps = [b - a for a, b in zip(stamps, stamps[1:])]
-        self.assertLess(max(gaps), 5 * 1.0 / RATE, "a gap of more than 5 periods")
+        self.assertLess(max(gaps), 5 * 1.0 / self.rate, "a gap of more than 5 periods")
         # Ticks sit on the pool's phase of the period grid (~tick_phase): the stamp is the
         # tick's wake-up time, so it is the grid point plus the wake-up latency.
-        period = 1.0 / RATE
+        period = 1.0 / self.rate
         late = sorted((t - self.tick_phase * period) % period for t in stamps)
         rospy.loginfo("ticks %.3f ms (median) after their phase %.2f of the period",
                       late[len(late) // 2] * 1e3, self.tick_phase)
@@ -219,7 +229,7 @@ class PoolTest(unittest.TestCase):
         self.state_pub.publish(stale)
         time.sleep(0.35)
         kept = self.commands_between(t_bad + 0.05, t_bad + 0.3)
-        self.assertGreater(len(kept), 0.25 * RATE * 0.8)
+        self.assertGreater(len(kept), 0.25 * self.rate * 0.8)
         for m in kept:
             for v in m.volts:
                 self.assertTrue(-2.0 <= v <= 2.0, "pool dropped its plan before the timeout: %r" % (m.volts,))
@@ -227,7 +237,7 @@ class PoolTest(unittest.TestCase):
         # After the timeout (measured from the last valid reference) every cylinder exhausts.
         time.sleep(self.timeout + 0.3)
         after = self.commands_between(t_bad + self.timeout + 0.2, time.monotonic())
-        self.assertGreater(len(after), 0.2 * RATE * 0.8)
+        self.assertGreater(len(after), 0.2 * self.rate * 0.8)
         for m in after:
             self.assertEqual(list(m.volts), [EXHAUST] * len(self.pool))
 
@@ -272,6 +282,14 @@ class PoolTest(unittest.TestCase):
             ({"cylinders": ["A_FFJ2_flex"], "ilqg": {"horizon": 0}}, "horizon"),
             ({"cylinders": ["A_FFJ2_flex"], "reference_timout": 1.0}, "reference_timout"),
             ({"cylinders": ["A_FFJ2_flex"], "tick_phase": 1.5}, "tick_phase"),
+            # A group: a cylinder in two members (one command names each once), a thread
+            # setting on a member (the group has one tick), a member without cylinders.
+            ({"members": ["a", "b"], "a": {"cylinders": ["A_FFJ2_flex"]},
+              "b": {"cylinders": ["A_FFJ2_ext", "A_FFJ2_flex"]}}, "/b/cylinders"),
+            ({"members": ["a", "b"], "a": {"cylinders": ["A_FFJ2_flex"]},
+              "b": {"cylinders": ["A_FFJ2_ext"], "rate": 100}}, "/b/rate"),
+            ({"members": ["a", "b"], "a": {"cylinders": ["A_FFJ2_flex"]}}, "/b/cylinders"),
+            ({"members": ["a"], "a": {"cylinders": ["A_FFJ2_flex"], "ilqg": {"horizon": 0}}}, "/a/ilqg: horizon"),
         ]
         try:
             for i, (params, field) in enumerate(cases):
@@ -288,6 +306,56 @@ class PoolTest(unittest.TestCase):
                 rospy.loginfo("%s", lines[0])
         finally:
             os.unlink(bad_yaml.name)
+
+    def test_3_group_one_command_and_exhaust_on_a_stale_state(self):
+        if not self.members:
+            self.skipTest("a single pool (pool.test, pool_nodelet.test)")
+        forces = [8.0, 4.0, 60.0] + [5.0] * len(self.others)
+
+        def drive(seconds):
+            start = time.monotonic()
+            while time.monotonic() - start < seconds:
+                self.reference(forces)
+                time.sleep(0.05)
+            return start
+
+        start = drive(1.5)
+        driven = self.commands_between(start + 1.0, time.monotonic())
+        # One message per tick of the group (not one per pool): distinct stamps a period apart,
+        # each naming every cylinder of the group once.
+        stamps = [m.header.stamp.to_sec() for m in driven]
+        self.assertEqual(len(set(stamps)), len(stamps), "two commands for one tick")
+        self.assertAlmostEqual((len(stamps) - 1) / (stamps[-1] - stamps[0]), self.rate, delta=0.05 * self.rate)
+        for m in driven:
+            self.assertEqual(sorted(self.state_names[i] for i in m.index), sorted(self.pool))
+            for v in m.volts:
+                self.assertTrue(-2.0 <= v <= 2.0, "not driven: %r" % (m.volts,))
+
+        # The driver falls silent while the references go on: once the last state is older
+        # than state_timeout (0.05 s), every cylinder of every pool exhausts.
+        type(self).states_paused = True
+        stop = drive(0.5)
+        stale = self.commands_between(stop + 0.15, time.monotonic())
+        type(self).states_paused = False
+        self.assertGreater(len(stale), 0.3 * self.rate * 0.8)
+        for m in stale:
+            self.assertEqual(list(m.volts), [EXHAUST] * len(self.pool))
+        # Fresh states again: the pools drive again.
+        back = drive(1.0)
+        for m in self.commands_between(back + 0.5, time.monotonic()):
+            for v in m.volts:
+                self.assertTrue(-2.0 <= v <= 2.0, "not driven again: %r" % (m.volts,))
+
+        # One status per pool, named as the pool node it replaces, with its own cylinders.
+        def reported():
+            return all(self.latest_status(name) is not None for name, _ in self.members)
+        self.wait_for(reported, 3.0, "a status of every pool of the group")
+        for name, cylinders in self.members:
+            kv = {x.key: x.value for x in self.latest_status(name).values}
+            self.assertEqual(kv["cylinders"].split(), cylinders, name)
+            self.assertIn("%d pools" % len(self.members), kv["group"])
+            self.assertGreater(int(kv["states_accepted"]), 0, name)
+            rospy.loginfo("%s: %s", name, kv)
 
 
 if __name__ == "__main__":

@@ -1,8 +1,9 @@
 // The pool's tick allocates nothing after start-up: this binary replaces malloc & co. and
 // the global operator new/delete with versions that count calls made by a thread while
-// its thread_local flag is set, and runs thousands of ticks (CylinderPool::update + the
-// hand-over of the commands into the publisher's slot) with states and references fed in
-// between, asserting that the tick thread made no allocation and freed nothing.
+// its thread_local flag is set, and runs thousands of ticks (CylinderPool::update or
+// PoolGroup::update + the hand-over of the commands into the publisher's slot) with states
+// and references fed in between, asserting that the tick thread made no allocation and
+// freed nothing.
 #include <atomic>
 #include <cmath>
 #include <cstdlib>
@@ -14,6 +15,7 @@
 
 #include "adroit_pneumatics/plant.h"
 #include "adroit_pneumatics/pool.h"
+#include "adroit_pneumatics/pool_group.h"
 
 // --- the allocation hook ----------------------------------------------------------------
 namespace {
@@ -95,11 +97,32 @@ PoolOptions options(const std::string& controller) {
   return o;
 }
 
-CylinderPool makePool(const std::string& controller) {
+std::vector<PoolCylinder> cylinders(const std::vector<std::string>& names) {
   const CylinderSpec s = cylinderSpec("M9");
-  std::vector<PoolCylinder> cylinders;
-  for (const auto& n : kPool) cylinders.push_back({n, s.bore_area, s.dead_volume, ParametricParams{}});
-  return CylinderPool(cylinders, kModel, options(controller));
+  std::vector<PoolCylinder> out;
+  for (const auto& n : names) out.push_back({n, s.bore_area, s.dead_volume, ParametricParams{}});
+  return out;
+}
+
+CylinderPool makePool(const std::string& controller) {
+  return CylinderPool(cylinders(kPool), kModel, options(controller));
+}
+
+// kPool's cylinders as a group of two pools (iLQG, PIDF): the same commands, in kPool order.
+PoolGroup makeGroup() {
+  std::vector<std::unique_ptr<CylinderPool>> pools;
+  pools.push_back(std::make_unique<CylinderPool>(cylinders({kPool[0], kPool[1]}), kModel, options("ilqg")));
+  pools.push_back(std::make_unique<CylinderPool>(cylinders({kPool[2]}), kModel, options("pidf")));
+  return PoolGroup(std::move(pools));
+}
+
+bool accepted(const StateVerdict& v) { return v.ok(); }
+bool accepted(const Verdict& v) { return v.ok(); }
+template <typename V>
+bool accepted(const std::vector<V>& verdicts) {
+  for (const V& v : verdicts)
+    if (!v.ok()) return false;
+  return true;
 }
 
 // The plant (the pool's own model per cylinder) and the input side, run on a thread whose
@@ -107,9 +130,10 @@ CylinderPool makePool(const std::string& controller) {
 // tick, with a gap of 0.3 s (longer than reference_timeout) every 2 s so that cylinders
 // exhaust and are driven again (controller reset and restart), and a reference jump
 // every second.
+template <typename Target>  // CylinderPool or PoolGroup
 class Feeder {
  public:
-  explicit Feeder(CylinderPool& pool) : pool_(pool), p_(kModel.size(), kAtm) {}
+  explicit Feeder(Target& pool) : pool_(pool), p_(kModel.size(), kAtm) {}
 
   void feed(int k, const std::vector<double>& commands) {
     const double t = k * kTick;
@@ -117,18 +141,18 @@ class Feeder {
     ParametricInputs in;
     in.volume = cylinderSpec("M9").dead_volume;
     for (std::size_t i = 0; i < kPool.size(); ++i) p_[i + 1] = model.step(p_[i + 1], commands[i], kTick, in);
-    ASSERT_TRUE(pool_.setState(t, t, kModel, p_, length_, rate_, 620e3).ok());
+    ASSERT_TRUE(accepted(pool_.setState(t, t, kModel, p_, length_, rate_, 620e3)));
     const bool gap = std::fmod(t, 2.0) > 1.7;
     if (k % 10 == 0 && !gap) {
       const double level = std::fmod(t, 1.0) < 0.5 ? 4.0 : 10.0;  // N, jumps
       for (int s = 0; s < 100; ++s)
         for (std::size_t j = 0; j < kPool.size(); ++j) force_[s * kPool.size() + j] = level + std::sin(t + 0.01 * s + j);
-      ASSERT_TRUE(pool_.setReference(t, t, 0.005, 100, kPool, force_).ok());
+      ASSERT_TRUE(accepted(pool_.setReference(t, t, 0.005, 100, kPool, force_)));
     }
   }
 
  private:
-  CylinderPool& pool_;
+  Target& pool_;
   std::vector<double> p_, length_ = std::vector<double>(kModel.size(), 0.01),
                           rate_ = std::vector<double>(kModel.size(), 0.0),
                           force_ = std::vector<double>(100 * kPool.size());
@@ -176,7 +200,7 @@ TEST(PoolRealtime, TickAllocatesNothingAfterWarmUp) {
   for (const char* controller : {"ilqg", "pidf"}) {
     CylinderPool pool = makePool(controller);
     CommandSlot slot(emptyCommand(pool.size()));
-    Feeder feeder(pool);
+    Feeder<CylinderPool> feeder(pool);
     std::vector<double> commands(pool.size(), -5.0);
     long during = 0;
     int driven_ticks = 0, exhaust_ticks = 0;
@@ -212,7 +236,7 @@ TEST(PoolRealtime, TickAllocatesNothingWithConcurrentInputs) {
   std::atomic<int> tick{-1}, fed{-1};
   std::atomic<bool> done{false};
   std::thread input([&] {
-    Feeder feeder(pool);
+    Feeder<CylinderPool> feeder(pool);
     std::vector<double> commands(pool.size(), -5.0);
     while (!done) {
       const int k = tick.load();
@@ -244,4 +268,32 @@ TEST(PoolRealtime, TickAllocatesNothingWithConcurrentInputs) {
   EXPECT_EQ(during, 0) << "mallocs " << g_mallocs << " frees " << g_frees << " news " << g_news << " deletes "
                        << g_deletes;
   EXPECT_EQ(pool.counters().ticks, 3000u);
+}
+
+// A group ticks its pools in turn and gathers their commands into one: nothing allocated
+// either, with the inputs (names resolved once for the group) fed between the ticks.
+TEST(PoolRealtime, GroupTickAllocatesNothingAfterWarmUp) {
+  PoolGroup group = makeGroup();
+  CommandSlot slot(emptyCommand(group.names().size()));
+  Feeder<PoolGroup> feeder(group);
+  std::vector<double> commands(group.names().size(), -5.0);
+  long during = 0;
+  int driven_ticks = 0;
+  for (int k = 0; k < 3000; ++k) {
+    feeder.feed(k, commands);
+    if (k == 500) resetCounts();
+    {
+      const CountAllocations counting;
+      putCommand(slot, k * kTick, group.update(k * kTick));
+    }
+    if (k >= 500) during = allocations();
+    if (slot.take()) commands = slot.front().volts;
+    driven_ticks += group.pool(0).exhausting() == 0 && group.pool(1).exhausting() == 0;
+    if (k % 200 == 0) group.pool(k / 200 % 2).takeWindow();
+  }
+  EXPECT_EQ(during, 0) << "mallocs " << g_mallocs << " frees " << g_frees << " news " << g_news << " deletes "
+                       << g_deletes;
+  EXPECT_GT(driven_ticks, 2000);
+  EXPECT_GE(group.pool(0).counters().reference_timeouts, 2u);
+  EXPECT_GE(group.pool(1).counters().reference_timeouts, 1u);
 }

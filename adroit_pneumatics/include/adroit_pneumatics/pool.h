@@ -19,7 +19,8 @@
 // (one tick thread) and the monitoring calls (counters, exhausting, takeWindow,
 // recordPolicyLag; any thread) may run concurrently. Inputs reach the tick through
 // lock-free hand-overs (handover.h), and update() allocates nothing and never waits once
-// every buffer has been used once (test_pool_realtime checks it).
+// every buffer has been used once (test_pool_realtime checks it). Several pools driven by
+// one input path, one tick and one command: PoolGroup (pool_group.h).
 #pragma once
 
 #include <array>
@@ -132,6 +133,35 @@ struct PoolWindow {
   std::size_t tracking_samples = 0;
 };
 
+// A message's names resolved against the model's cylinders. Hashing every name of every
+// message (48 names, 250 states/s, once per pool) was a visible share of the pools' CPU;
+// the names of a stream (the driver's states, the MPC's references) are the same from one
+// message to the next, so NameColumns keeps the last resolution and reuses it while the
+// names compare equal.
+struct Columns {
+  std::vector<std::string> names;  // as given (empty: the message named no cylinders)
+  std::vector<int> known;          // per column: position in the model order, -1 = not in the model
+  int first_unknown = -1;          // first column not in the model, -1 = none
+  int first_duplicate = -1;        // first column whose name an earlier column has, -1 = none
+  std::size_t size() const { return known.size(); }
+};
+
+class NameColumns {
+ public:
+  explicit NameColumns(const std::vector<std::string>& model_names);
+  // The resolution of `names`, valid until the next call. Allocates only when the names
+  // differ from the previous call's.
+  const Columns& resolve(const std::vector<std::string>& names);
+  // Every model cylinder in model order (a state without names).
+  const Columns& modelOrder() const { return model_order_; }
+  int find(const std::string& name) const;  // model position, -1 = none
+
+ private:
+  std::unordered_map<std::string, int> index_;
+  Columns model_order_, last_;
+  bool resolved_ = false;  // last_ holds a resolution
+};
+
 // The tick's commands on their way to the publisher thread.
 struct PoolCommand {
   double stamp = 0;           // s, the pool's clock at the tick
@@ -152,6 +182,7 @@ class CylinderPool {
 
   std::size_t size() const { return cylinders_.size(); }
   const std::vector<std::string>& names() const { return names_; }
+  const std::vector<std::string>& knownNames() const { return known_names_; }
   const PoolOptions& options() const { return options_; }
 
   // --- input thread ---------------------------------------------------------------------
@@ -160,6 +191,10 @@ class CylinderPool {
   // replace the plans of the pool's cylinders they name.
   Verdict setReference(double now, double t0, double dt, std::size_t steps, const std::vector<std::string>& names,
                        const std::vector<double>& force);
+  // The same with the names already resolved against known_names (PoolGroup resolves a
+  // message once for all of its pools).
+  Verdict setResolvedReference(double now, double t0, double dt, std::size_t steps, const Columns& columns,
+                               const std::vector<double>& force);
 
   // Actuator state stamped `stamp` (its freshness is judged by the stamp, not by when it
   // arrived). names empty = known_names order. length / length_rate may be empty (travel
@@ -168,6 +203,11 @@ class CylinderPool {
   StateVerdict setState(double now, double stamp, const std::vector<std::string>& names,
                         const std::vector<double>& pressure, const std::vector<double>& length,
                         const std::vector<double>& length_rate, double supply);
+  // The same with the names resolved against known_names (NameColumns::resolve, or
+  // modelOrder() for a state without names).
+  StateVerdict setResolvedState(double now, double stamp, const Columns& columns, const std::vector<double>& pressure,
+                                const std::vector<double>& length, const std::vector<double>& length_rate,
+                                double supply);
 
   // --- tick thread ----------------------------------------------------------------------
   // One control tick at time now. Commands (V) in names() order, always finite, in [-5, 5].
@@ -210,17 +250,16 @@ class CylinderPool {
 
   std::vector<PoolCylinder> cylinders_;
   std::vector<std::string> names_, known_names_;
-  std::unordered_map<std::string, std::size_t> known_index_;  // name -> position in known_names_
-  std::vector<int> slot_of_known_;                            // known position -> pool slot, -1 = not ours
+  std::vector<int> slot_of_known_;  // known position -> pool slot, -1 = not ours
   PoolOptions options_;
+  bool ilqg_ = true;                // options_.controller, compared once
 
   // Input thread: the complete current plans and states (a message may name only some
   // cylinders), copied whole into the hand-over's back buffer on every accepted message.
   std::vector<Plan> input_plans_;
   std::vector<State> input_states_;
   std::uint64_t next_serial_ = 1;
-  std::vector<std::uint32_t> seen_;  // duplicate-name check: seen_[known] == seen_mark_
-  std::uint32_t seen_mark_ = 0;
+  NameColumns state_columns_, reference_columns_;  // the names API's resolutions, one per stream
   std::vector<std::pair<int, std::size_t>> ours_;  // (slot, column) of the message being read
   std::vector<int> valve_index_;
   std::atomic<bool> indices_resolved_{false};

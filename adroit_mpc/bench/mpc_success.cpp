@@ -7,7 +7,9 @@
 //               [--out DIR] [--seed S] [--only-trial K] [--fixed-latency S] [--latency-sweep S,S,...]
 //               [--dt S] [--horizon S] [--skip K] [--sensed] [--feedback-scale F] [--contact M,S] [--events]
 //               [--idle S]
-//               [--compensation on|off|task] [--set key=number]... [--pool ilqg_key=number]...
+//               [--compensation on|off|task] [--set [task.]key=number]... [--pool ilqg_key=number]...
+//               [--object-mass KG] [--object-scale S] [--drop-height MIN,MAX] [--drop-offset M]
+//               [--sensor-noise F] [--keys N] [--key-set DIGITS] [--sweep NAME=v1,v2,...]...
 //
 // --compensation: latency compensation (latency_compensation.h: plan from the state the running
 // policy is predicted to reach when the plan takes over, at the planning latency: the fixed one,
@@ -39,8 +41,29 @@
 // --events: print each trial's task events (phase, relocation stage, keys) with their time.
 // --idle S: typing only: the hand rests over the keys S seconds, closed loop, before the
 //   sequence is given; keys registered meanwhile are typed unasked (printed, CSV `unasked`).
-// --set key=number: a task parameter (weight, threshold) over config/tasks/<task>.yaml, for
-// tuning without a rebuild (the --latency-sweep runs use it too).
+// --set [task.]key=number: a task parameter (weight, threshold) over config/tasks/<task>.yaml, for
+// tuning without a rebuild (the --latency-sweep runs use it too). Without "task." the key must be
+// a number parameter of every task that runs. Refused: keys no task has, and keys that would
+// change nothing here (the planner hints: --horizon, --dt, --skip, --feedback-scale,
+// --compensation set those; object_mass / object_radius, which no task reads: --object-mass,
+// --object-scale).
+//
+// What the tasks were not tuned on (success/robustness.h; defaults: what they were tuned on):
+// --object-mass KG, --object-scale S: the object (bottle, ball) in the simulated world and in
+//   the planning model alike (scaleObjectBody; S scales its geoms, inertia ~ S^2);
+// --drop-height MIN,MAX (or H): the release height above the catch goal / relocation hold
+//   (0.04,0.09); --drop-offset M: the sideways range +-M in x and y (0.015);
+// --sensor-noise F: every noise std of the driver's sensors times F (read by the planner with
+//   --sensed, and by the pools in pneumatic variants; refused when nothing reads them);
+// --keys N, --key-set DIGITS: typing sequences of N keys drawn from DIGITS (10, 0123456789).
+// An option is refused when no task that runs would feel it. --sweep NAME=v1,v2,... (NAME: an
+// option above with '_' for '-', drop_height takes one height per value) runs the tasks and
+// variants once per value instead of the run above, prints a table per value and one across
+// the values, writes DIR/success_sweep.csv and ends with a RESULT line per task, variant and
+// value (success in %: trials, typing: keys right; target 90).
+// Typing reports its presses: every registered press, and the wrong ones (a key other than the
+// one expected next, a wrong key later backspaced included: keys right forgives it);
+// RESULT type_<variant>_wrong_press_percent (target <= 10 %), DIR/success_presses.csv.
 // --pool ilqg_key=number: a setting of the pools' iLQG (names of IlqgParams, setIlqgParam),
 // over config/pools.yaml's (iterations 1, the rest IlqgParams' defaults).
 //
@@ -75,7 +98,8 @@
 //             drop.) The CSV has the lowest height and, from the goal on, the farthest distance
 //             of the ball from the grasp site;
 //   type      a random 10-digit sequence; until typed or 1.5 s per key; keys correct = keys
-//             typed correctly (auto-correction allowed), speed = correct keys per minute.
+//             typed correctly (auto-correction allowed), speed = correct keys per minute;
+//             presses and wrong presses (TypeTask::presses, wrongPresses).
 //
 // Writes DIR/success_trials.csv (one row per trial), DIR/success_traces.csv (the first trial
 // of each task and variant, error over time) and plots them with plot_success.py into
@@ -84,6 +108,7 @@
 // first trial's planned and sensed tension per cylinder at the pools' ticks) and print the
 // force tracking per group next to the plant's floor (adroit_pneumatics ForceTrackingAudit).
 // Ends with RESULT lines (DESIGN.md section 5).
+#include <adroit_core/command_line.h>
 #include <adroit_core/mujoco_model.h>
 #include <adroit_core/run_program.h>
 #include <adroit_core/timing_stats.h>
@@ -101,6 +126,8 @@
 #include <adroit_mpc/task.h>
 #include <adroit_mpc/task_params.h>
 #include <adroit_mpc/type_task.h>
+
+#include "success/robustness.h"
 
 #include <algorithm>
 #include <array>
@@ -161,6 +188,7 @@ struct TrialResult {
   double farthest_from_grasp = 0;  // relocation, from the goal on: object centre to S_grasp (m)
   int keys_correct = 0, keys_total = 0, diverged = 0;
   int unasked = 0;  // typing with --idle: keys registered before the sequence was given
+  int presses = 0, wrong_presses = 0;  // typing, from the sequence on (TypeTask::presses, wrongPresses)
   std::vector<std::pair<double, double>> trace;  // (t, error)
   std::vector<std::vector<double>> qpos_trace;   // qpos at the trace times (for render_states)
 };
@@ -169,7 +197,11 @@ std::string sceneOf(const std::string& task) {
   return task == "catch" ? "bottle" : task == "relocate" ? "ball" : "keypad";
 }
 
-std::vector<TrialSpec> makeTrials(const std::string& task, int n, unsigned seed) {
+// The drop options scale the same draws whatever their values, so trial k of one drop is
+// trial k of another but for the drop (and the defaults give the trials as they always were);
+// the typing options draw other sequences.
+std::vector<TrialSpec> makeTrials(const std::string& task, int n, unsigned seed, const success::World& world) {
+  const double side = world.drop_offset, height = world.drop_center, spread = world.drop_half;
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> u(-1, 1);
   const TaskParams defaults = defaultTaskParams(task);
@@ -180,18 +212,18 @@ std::vector<TrialSpec> makeTrials(const std::string& task, int n, unsigned seed)
     if (task == "catch") {
       const Eigen::Vector3d goal = paramVector3(task, defaults, "goal_position");
       s.goal = goal;
-      s.object_start = goal + Eigen::Vector3d(0.015 * u(rng), 0.015 * u(rng), 0.065 + 0.025 * u(rng));
+      s.object_start = goal + Eigen::Vector3d(side * u(rng), side * u(rng), height + spread * u(rng));
     } else if (task == "relocate") {
       const Eigen::Vector3d hold = paramVector3(task, defaults, "hold_position");
-      s.object_start = hold + Eigen::Vector3d(0.015 * u(rng), 0.015 * u(rng), 0.065 + 0.025 * u(rng));
+      s.object_start = hold + Eigen::Vector3d(side * u(rng), side * u(rng), height + spread * u(rng));
       Eigen::Vector3d offset;
       do {  // beyond the success radius of the hold by at least 2 cm
         offset = Eigen::Vector3d(0.08 * u(rng), 0.06 * u(rng), -0.05 + 0.05 * u(rng));
       } while (offset.norm() < kRelocateMinDistance);
       s.goal = hold + offset;
     } else {
-      std::uniform_int_distribution<int> digit(0, 9);
-      for (int k = 0; k < 10; ++k) s.keys.push_back(static_cast<char>('0' + digit(rng)));
+      std::uniform_int_distribution<int> digit(0, static_cast<int>(world.key_set.size()) - 1);
+      for (int k = 0; k < world.keys; ++k) s.keys.push_back(world.key_set[digit(rng)]);
     }
   }
   return trials;
@@ -241,8 +273,10 @@ void printShoulderBound(const std::string& scene_file) {
 class TrialRunner {
  public:
   // contact_margin / contact_softness >= 0 override the planning model's (--contact M,S).
+  // world: the object's mass and size in both worlds and the sensors' noise (the drop and the
+  // keys are the trials', makeTrials).
   TrialRunner(const std::string& task, const Variant& variant, const PlannerSettings& overrides,
-              double contact_margin = -1, double contact_softness = -1)
+              const success::World& world, double contact_margin = -1, double contact_softness = -1)
       : task_name_(task), variant_(variant), settings_(overrides) {
     const TaskParams defaults = defaultTaskParams(task);
     if (settings_.horizon <= 0) settings_.horizon = paramNumber(task, defaults, "horizon", 0.01, 5);
@@ -262,6 +296,8 @@ class TrialRunner {
     if (task == "type") ms.contact_margin = 0.001, ms.contact_softness = 0.001;  // as the node
     if (contact_margin >= 0) ms.contact_margin = contact_margin;
     if (contact_softness >= 0) ms.contact_softness = contact_softness;
+    const bool changed_object = task != "type" && (world.object_mass > 0 || world.object_scale != 1);
+    if (changed_object) ms.object_mass = world.object_mass, ms.object_size_scale = world.object_scale;
     const std::string share = descriptionShareDir();
     plan_model_ = loadPlanningModel(adroit::description::sceneFile(share, sceneOf(task), true), ms);
     observe_ = adroit::makeData(plan_model_.get());
@@ -271,6 +307,12 @@ class TrialRunner {
     config.model_path = adroit::description::sceneFile(share, sceneOf(task), variant.world_as_planned);
     config.mode = variant.pneumatic ? adroit::driver::ActuationMode::kPneumatic : adroit::driver::ActuationMode::kForce;
     config.initial_keyframe = "rest";
+    if (changed_object) {  // the same object in the world the robot is in
+      object_scene_ = std::make_unique<success::ObjectVariantScene>(config.model_path, world.object_mass,
+                                                                     world.object_scale);
+      config.model_path = object_scene_->path();
+    }
+    success::scaleSensorNoise(world.sensor_noise, config.sensors);
     robot_config_ = config;
     robot_ = std::make_unique<adroit::driver::SimulatedRobot>(config);
     const mjModel* m = robot_->model();
@@ -471,6 +513,8 @@ class TrialRunner {
       auto& type = static_cast<TypeTask&>(runner_->task());
       r.keys_total = static_cast<int>(spec.keys.size());
       r.keys_correct = type.typedCorrectly();
+      r.presses = type.presses();
+      r.wrong_presses = type.wrongPresses();
       r.final_error = r.keys_total - r.keys_correct;
       r.success = r.keys_correct == r.keys_total;
     } else {
@@ -778,6 +822,7 @@ class TrialRunner {
   adroit::DataPtr observe_;
   std::unique_ptr<MpcRunner> runner_;  // this trial's closed loop
   PlannerState plan_input_;             // the state each plan starts from
+  std::unique_ptr<success::ObjectVariantScene> object_scene_;  // --object-mass / --object-scale
   adroit::driver::SimConfig robot_config_;
   std::unique_ptr<adroit::driver::SimulatedRobot> robot_;
   std::vector<std::uint16_t> all_actuators_;
@@ -803,261 +848,386 @@ std::vector<std::string> split(const std::string& s) {
   return out;
 }
 
-}  // namespace
+const std::map<std::string, Variant>& knownVariants() {
+  static const std::map<std::string, Variant> known = {
+      {"ilqg", {"ilqg", "ilqg", true}},
+      {"sampling", {"sampling", "sampling", true}},
+      {"cem", {"cem", "cem", true}},
+      {"cem_pneumatic", {"cem_pneumatic", "cem", true, true}},
+      {"nosyn", {"nosyn", "ilqg", false}},
+      {"pneumatic", {"pneumatic", "ilqg", true, true}},
+      {"pneumatic_open", {"pneumatic_open", "ilqg", true, true, true}},
+      {"as_planned", {"as_planned", "ilqg", true, false, false, true}},
+      {"nocomp", {"nocomp", "ilqg", true, false, false, false, false}},
+      {"coldfd", {"coldfd", "ilqg", true, false, false, false, true, false}}};
+  return known;
+}
 
-int main(int argc, char** argv) {
+// The command line (see the top of this file).
+struct Options {
   int trials = 20;
   unsigned seed = 1;
+  int only_trial = -1;  // >= 0: run this trial of the seeded set alone (its traces are written)
   double fixed_latency = -1;
   bool sensed = false;
-  double feedback_scale = -1;  // the task's hint
+  double feedback_scale = -1;         // the task's hint
   std::string compensation = "task";  // on | off | task (its hint)
   double contact_margin = -1, contact_softness = -1;  // --contact M,S
   bool print_events = false;
-  double idle = 0;  // --idle S: typing rests that long before its sequence
-  std::map<std::string, double> params;  // --set key=value
-  pneumatics::IlqgParams pool_ilqg;      // --pool key=value; the pools' settings as config/pools.yaml has them
-  pool_ilqg.iterations = 1;
-  std::vector<std::string> sweep;  // fixed latencies [s] for iLQG on every task
-  PlannerSettings overrides;       // horizon, dt <= 0: the task's hints
-  overrides.horizon = overrides.dt = -1;
-  overrides.derivative_skip = -1;
-  int only_trial = -1;  // >= 0: run this trial of the seeded set alone (its traces are written)
-  std::string out_dir = ".", tasks_arg = "catch,relocate,type", variants_arg = "ilqg,sampling,nosyn,pneumatic";
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--trials" && i + 1 < argc) trials = std::atoi(argv[++i]);
-    else if (a == "--tasks" && i + 1 < argc) tasks_arg = argv[++i];
-    else if (a == "--variants" && i + 1 < argc) variants_arg = argv[++i];
-    else if (a == "--out" && i + 1 < argc) out_dir = argv[++i];
-    else if (a == "--seed" && i + 1 < argc) seed = static_cast<unsigned>(std::atoi(argv[++i]));
-    else if (a == "--only-trial" && i + 1 < argc) only_trial = std::atoi(argv[++i]);
-    else if (a == "--fixed-latency" && i + 1 < argc) fixed_latency = std::atof(argv[++i]);
-    else if (a == "--latency-sweep" && i + 1 < argc) sweep = split(argv[++i]);
-    else if (a == "--sensed") sensed = true;
-    else if (a == "--feedback-scale" && i + 1 < argc) feedback_scale = std::atof(argv[++i]);
-    else if (a == "--compensation" && i + 1 < argc) compensation = argv[++i];
-    else if (a == "--contact" && i + 1 < argc && std::strchr(argv[i + 1], ',')) {
-      contact_margin = std::atof(argv[++i]);
-      contact_softness = std::atof(std::strchr(argv[i], ',') + 1);
-    }
-    else if (a == "--dt" && i + 1 < argc) overrides.dt = std::atof(argv[++i]);
-    else if (a == "--horizon" && i + 1 < argc) overrides.horizon = std::atof(argv[++i]);
-    else if (a == "--skip" && i + 1 < argc) overrides.derivative_skip = std::atoi(argv[++i]);
-    else if (a == "--events") print_events = true;
-    else if (a == "--idle" && i + 1 < argc) idle = std::atof(argv[++i]);
-    else if (a == "--set" && i + 1 < argc && std::strchr(argv[i + 1], '=')) {
-      const std::string kv = argv[++i];
-      params[kv.substr(0, kv.find('='))] = std::atof(kv.c_str() + kv.find('=') + 1);
-    }
-    else if (a == "--pool" && i + 1 < argc && std::strchr(argv[i + 1], '=')) {
-      const std::string kv = argv[++i];
-      if (!pneumatics::setIlqgParam(pool_ilqg, kv.substr(0, kv.find('=')), std::atof(kv.c_str() + kv.find('=') + 1))) {
-        std::fprintf(stderr, "--pool: unknown iLQG parameter in '%s'\n", kv.c_str());
-        return 2;
-      }
-    }
-    else {
-      std::fprintf(stderr,
-                   "usage: mpc_success [--trials N] [--tasks catch,relocate,type] "
-                   "[--variants ilqg,sampling,nosyn,pneumatic,pneumatic_open,as_planned,nocomp,coldfd] [--out DIR] [--seed S] "
-                   "[--only-trial K] [--fixed-latency S] [--latency-sweep S,S,...] [--dt S] [--horizon S] [--skip K] [--sensed] "
-                   "[--feedback-scale F] [--compensation on|off|task] "
-                   "[--contact M,S] [--events] [--idle S] [--set key=number]... [--pool ilqg_key=number]...\n");
-      return 2;
-    }
-  }
-  if (trials < 1) {
-    std::fprintf(stderr, "mpc_success: --trials must be at least 1\n");
-    return 2;
-  }
-  if (compensation != "task" && compensation != "on" && compensation != "off") {
-    std::fprintf(stderr, "mpc_success: --compensation must be on, off or task (the task's hint)\n");
-    return 2;
-  }
-  if (feedback_scale != -1 && !(feedback_scale >= 0 && feedback_scale <= 1)) {
-    std::fprintf(stderr, "mpc_success: --feedback-scale must be in [0, 1]\n");
-    return 2;
-  }
-  const std::map<std::string, Variant> known = {{"ilqg", {"ilqg", "ilqg", true}},
-                                                {"sampling", {"sampling", "sampling", true}},
-                                                {"cem", {"cem", "cem", true}},
-                                                {"cem_pneumatic", {"cem_pneumatic", "cem", true, true}},
-                                                {"nosyn", {"nosyn", "ilqg", false}},
-                                                {"pneumatic", {"pneumatic", "ilqg", true, true}},
-                                                {"pneumatic_open", {"pneumatic_open", "ilqg", true, true, true}},
-                                                {"as_planned", {"as_planned", "ilqg", true, false, false, true}},
-                                                {"nocomp", {"nocomp", "ilqg", true, false, false, false, false}},
-                                                {"coldfd", {"coldfd", "ilqg", true, false, false, false, true, false}}};
+  double idle = 0;                  // --idle S: typing rests that long before its sequence
+  success::TaskNumbers params;      // --set [task.]key=number, per task
+  pneumatics::IlqgParams pool_ilqg;  // --pool key=value over config/pools.yaml's settings
+  bool pool_set = false;             // a --pool was given
+  std::vector<std::string> latency_sweep;  // fixed latencies [s] for iLQG on every task
+  PlannerSettings overrides;        // horizon, dt, skip <= 0: the task's hints
+  std::string out_dir = ".";
+  std::vector<std::string> tasks;
   std::vector<Variant> variants;
-  for (const auto& v : split(variants_arg)) {
-    if (!known.count(v)) {
-      std::fprintf(stderr, "mpc_success: unknown variant '%s' (known: ilqg, sampling, cem, cem_pneumatic, nosyn, pneumatic, pneumatic_open, as_planned, nocomp, coldfd)\n", v.c_str());
-      return 2;
-    }
-    variants.push_back(known.at(v));
+  success::World world;                // --object-mass ... --key-set
+  std::vector<success::Sweep> sweeps;  // --sweep name=v1,v2,...
+
+  bool has(const std::string& variant) const {
+    return std::any_of(variants.begin(), variants.end(), [&](const Variant& v) { return v.name == variant; });
   }
-  const std::vector<std::string> tasks = split(tasks_arg);
-  for (const auto& t : tasks) {
-    if (t != "catch" && t != "relocate" && t != "type") {
-      std::fprintf(stderr, "mpc_success: unknown task '%s' (known: catch, relocate, type)\n", t.c_str());
-      return 2;
+  bool poolsRun() const {
+    return std::any_of(variants.begin(), variants.end(), [](const Variant& v) { return v.pneumatic; });
+  }
+  std::map<std::string, double> paramsOf(const std::string& task) const {
+    const auto it = params.find(task);
+    return it == params.end() ? std::map<std::string, double>{} : it->second;
+  }
+};
+
+constexpr const char* kUsage =
+    "usage: mpc_success [--trials N] [--tasks catch,relocate,type] "
+    "[--variants ilqg,sampling,cem,cem_pneumatic,nosyn,pneumatic,pneumatic_open,as_planned,nocomp,coldfd] [--out DIR] "
+    "[--seed S] [--only-trial K] [--fixed-latency S] [--latency-sweep S,S,...] [--dt S] [--horizon S] [--skip K] "
+    "[--sensed] [--feedback-scale F] [--compensation on|off|task] [--contact M,S] [--events] [--idle S] "
+    "[--set [task.]key=number]... [--pool ilqg_key=number]... [--object-mass KG] [--object-scale S] "
+    "[--drop-height MIN,MAX] [--drop-offset M] [--sensor-noise F] [--keys N] [--key-set DIGITS] "
+    "[--sweep NAME=v1,v2,...]...";
+
+// A "--flag key=number" value; fails naming the flag.
+std::pair<std::string, double> keyNumber(adroit::CommandLine& args) {
+  const std::string text = args.text();
+  const auto equals = text.find('=');
+  double value = 0;
+  if (equals == std::string::npos || !success::parseNumber(text.substr(equals + 1), &value))
+    args.fail(args.flag() + " needs key=number, not '" + text + "'");
+  return {text.substr(0, equals), value};
+}
+
+// "--object-mass" for the option object_mass.
+std::string flagOf(std::string name) {
+  std::replace(name.begin(), name.end(), '_', '-');
+  return "--" + name;
+}
+
+// Variants and tasks by name, --set against the tasks, and options that would change nothing.
+void checkOptions(Options& o, adroit::CommandLine& args, const std::string& tasks, const std::string& variants,
+                  const std::vector<std::string>& sets) {
+  if (o.trials < 1) args.fail("--trials must be at least 1");
+  if (o.only_trial >= o.trials)
+    args.fail("--only-trial " + std::to_string(o.only_trial) + " needs --trials > " + std::to_string(o.only_trial));
+  if (o.compensation != "task" && o.compensation != "on" && o.compensation != "off")
+    args.fail("--compensation must be on, off or task (the task's hint)");
+  if (o.feedback_scale != -1 && !(o.feedback_scale >= 0 && o.feedback_scale <= 1))
+    args.fail("--feedback-scale must be in [0, 1]");
+  for (const auto& v : split(variants)) {
+    if (!knownVariants().count(v))
+      args.fail("unknown variant '" + v + "' (known: ilqg, sampling, cem, cem_pneumatic, nosyn, pneumatic, "
+                "pneumatic_open, as_planned, nocomp, coldfd)");
+    o.variants.push_back(knownVariants().at(v));
+  }
+  o.tasks = split(tasks);
+  for (const auto& t : o.tasks)
+    if (t != "catch" && t != "relocate" && t != "type") args.fail("unknown task '" + t + "' (known: catch, relocate, type)");
+  if (const std::string why = success::resolveTaskParams(sets, o.tasks, &o.params); !why.empty()) args.fail(why);
+  for (const auto& name : success::changedOptions(o.world))
+    if (const auto why = success::whyNoEffect(name, o.tasks, o.sensed, o.poolsRun()); !why.empty())
+      args.fail(flagOf(name) + " would change nothing: " + why);
+  for (const auto& sweep : o.sweeps)
+    if (const auto why = success::whyNoEffect(sweep.name, o.tasks, o.sensed, o.poolsRun()); !why.empty())
+      args.fail("--sweep " + sweep.name + " would change nothing: " + why);
+  if (o.pool_set && !o.poolsRun()) args.fail("--pool would change nothing: no variant runs the pools");
+  if (o.idle > 0 && std::find(o.tasks.begin(), o.tasks.end(), "type") == o.tasks.end())
+    args.fail("--idle would change nothing: only task type rests over its keys first");
+  if (!o.sweeps.empty() && !o.latency_sweep.empty())
+    args.fail("--sweep and --latency-sweep: one sweep a run");
+}
+
+Options parseOptions(int argc, char** argv) {
+  Options o;
+  o.pool_ilqg.iterations = 1;  // the pools' settings as config/pools.yaml has them
+  o.overrides.horizon = o.overrides.dt = -1;
+  o.overrides.derivative_skip = -1;
+  std::string tasks = "catch,relocate,type", variants = "ilqg,sampling,nosyn,pneumatic";
+  std::vector<std::string> sets;
+  adroit::CommandLine args(argc, argv, kUsage);
+  const auto world_option = [&](const char* name) {
+    if (const std::string why = success::setWorldOption(o.world, name, args.text()); !why.empty())
+      args.fail(args.flag() + " " + why);
+  };
+  while (args.next()) {
+    if (args.is("--trials")) o.trials = static_cast<int>(args.integer());
+    else if (args.is("--tasks")) tasks = args.text();
+    else if (args.is("--variants")) variants = args.text();
+    else if (args.is("--out")) o.out_dir = args.text();
+    else if (args.is("--seed")) o.seed = static_cast<unsigned>(args.integer());
+    else if (args.is("--only-trial")) o.only_trial = static_cast<int>(args.integer());
+    else if (args.is("--fixed-latency")) o.fixed_latency = args.number();
+    else if (args.is("--latency-sweep")) {
+      o.latency_sweep = split(args.text());
+      double latency = 0;
+      for (const auto& value : o.latency_sweep)
+        if (!success::parseNumber(value, &latency) || latency < 0)
+          args.fail("--latency-sweep needs latencies >= 0 [s], not '" + value + "'");
     }
+    else if (args.is("--sensed")) o.sensed = true;
+    else if (args.is("--feedback-scale")) o.feedback_scale = args.number();
+    else if (args.is("--compensation")) o.compensation = args.text();
+    else if (args.is("--contact")) {
+      const auto parts = split(args.text());
+      if (parts.size() != 2 || !success::parseNumber(parts[0], &o.contact_margin) ||
+          !success::parseNumber(parts[1], &o.contact_softness))
+        args.fail("--contact needs MARGIN,SOFTNESS [m]");
+    }
+    else if (args.is("--dt")) o.overrides.dt = args.number();
+    else if (args.is("--horizon")) o.overrides.horizon = args.number();
+    else if (args.is("--skip")) o.overrides.derivative_skip = static_cast<int>(args.integer());
+    else if (args.is("--events")) o.print_events = true;
+    else if (args.is("--idle")) o.idle = args.number();
+    else if (args.is("--set")) sets.push_back(args.text());
+    else if (args.is("--pool")) {
+      const auto [key, value] = keyNumber(args);
+      if (!pneumatics::setIlqgParam(o.pool_ilqg, key, value)) args.fail("--pool: unknown iLQG parameter '" + key + "'");
+      o.pool_set = true;
+    }
+    else if (args.is("--object-mass")) world_option("object_mass");
+    else if (args.is("--object-scale")) world_option("object_scale");
+    else if (args.is("--drop-height")) world_option("drop_height");
+    else if (args.is("--drop-offset")) world_option("drop_offset");
+    else if (args.is("--sensor-noise")) world_option("sensor_noise");
+    else if (args.is("--keys")) world_option("keys");
+    else if (args.is("--key-set")) world_option("key_set");
+    else if (args.is("--sweep")) {
+      success::Sweep sweep;
+      if (const std::string why = success::parseSweep(args.text(), &sweep); !why.empty()) args.fail("--sweep " + why);
+      o.sweeps.push_back(sweep);
+    }
+    else args.unknown();
+  }
+  checkOptions(o, args, tasks, variants, sets);
+  return o;
+}
+
+// Per variant of a task, over its trials.
+struct Tally {
+  int n = 0, ok = 0, diverged = 0, keys_ok = 0, keys_all = 0, unasked = 0, unasked_trials = 0;
+  int presses = 0, wrong_presses = 0;
+  double error_sum = 0, typing_time = 0;
+  std::vector<double> plan_ms, start_errors;
+  std::array<std::vector<double>, 5> phase_ms;
+  void add(const TrialResult& r) {
+    ++n;
+    ok += r.success;
+    diverged += r.diverged;
+    error_sum += r.final_error;
+    keys_ok += r.keys_correct;
+    keys_all += r.keys_total;
+    unasked += r.unasked;
+    unasked_trials += r.unasked > 0;
+    presses += r.presses;
+    wrong_presses += r.wrong_presses;
+    typing_time += r.duration;
+    plan_ms.push_back(r.plan_ms_median);
+    start_errors.push_back(r.start_error_median);
+    for (std::size_t k = 0; k < phase_ms.size(); ++k) phase_ms[k].push_back(r.phase_ms_median[k]);
+  }
+  double successRate() const { return static_cast<double>(ok) / n; }
+  double keysRate() const { return keys_all ? static_cast<double>(keys_ok) / keys_all : 0; }
+  double keysPerMinute() const { return typing_time > 0 ? 60.0 * keys_ok / typing_time : 0; }
+  double wrongPercent() const { return presses ? 100.0 * wrong_presses / presses : 0; }
+  // The issue's success figure: trials for the object tasks, keys right for typing.
+  double successPercent(const std::string& task) const { return 100 * (task == "type" ? keysRate() : successRate()); }
+};
+
+// Where the trials go. The run without --sweep: success_trials.csv (as it always was),
+// success_traces.csv and the states (and pool forces) of each task's first trial, and
+// success_presses.csv (typing). A sweep: success_sweep.csv, one row per point and trial.
+struct Outputs {
+  std::string dir;
+  std::ofstream trials, traces, presses, sweep;
+  std::string point;  // the sweep point of the rows: "name,value"
+
+  bool open(const std::string& out_dir, bool sweeping) {
+    dir = out_dir;
+    if (sweeping) {
+      sweep.open(dir + "/success_sweep.csv");
+      sweep << "sweep,value,task,variant,trial,success,final_error,keys_correct,keys_total,presses,wrong_presses,"
+               "unasked,duration,plan_ms\n";
+      return static_cast<bool>(sweep);
+    }
+    trials.open(dir + "/success_trials.csv");
+    traces.open(dir + "/success_traces.csv");
+    presses.open(dir + "/success_presses.csv");
+    trials << "task,variant,trial,success,final_error,lowest_z,farthest_from_grasp,keys_correct,keys_total,duration,"
+              "plan_ms,diverged,unasked\n";
+    traces << "task,variant,t,error\n";
+    presses << "variant,trial,presses,wrong_presses,keys_correct,keys_total,unasked\n";
+    return trials && traces && presses;
   }
 
-  std::ofstream trials_csv(out_dir + "/success_trials.csv"), traces_csv(out_dir + "/success_traces.csv");
-  if (!trials_csv || !traces_csv) {
-    std::fprintf(stderr, "mpc_success: cannot write into %s\n", out_dir.c_str());
-    return 2;
+  void record(const std::string& task, const Variant& variant, const TrialSpec& spec, const TrialResult& r,
+              const TrialRunner& runner, bool first) {
+    if (sweep.is_open()) {
+      sweep << point << "," << task << "," << variant.name << "," << spec.index << "," << r.success << ","
+            << r.final_error << "," << r.keys_correct << "," << r.keys_total << "," << r.presses << ","
+            << r.wrong_presses << "," << r.unasked << "," << r.duration << "," << r.plan_ms_median << "\n";
+      return;
+    }
+    trials << task << "," << variant.name << "," << spec.index << "," << r.success << "," << r.final_error << ","
+           << (r.lowest_z > 1e8 ? 0 : r.lowest_z) << "," << r.farthest_from_grasp << "," << r.keys_correct << ","
+           << r.keys_total << "," << r.duration << "," << r.plan_ms_median << "," << r.diverged << "," << r.unasked
+           << "\n";
+    if (task == "type")
+      presses << variant.name << "," << spec.index << "," << r.presses << "," << r.wrong_presses << ","
+              << r.keys_correct << "," << r.keys_total << "," << r.unasked << "\n";
+    if (!first) return;
+    for (const auto& [time, e] : r.trace) traces << task << "," << variant.name << "," << time << "," << e << "\n";
+    runner.writeStates(dir + "/states_" + task + "_" + variant.name + ".csv", r);
+    runner.writeForces(dir + "/forces_" + task + "_" + variant.name + ".csv");
   }
-  trials_csv << "task,variant,trial,success,final_error,lowest_z,farthest_from_grasp,keys_correct,keys_total,duration,plan_ms,diverged,unasked\n";
-  traces_csv << "task,variant,t,error\n";
-  std::printf("Behaviour MPC success, %d trial(s) per task, emulated real time on this machine (seed %u)\n\n", trials,
-              seed);
+};
+
+std::unique_ptr<TrialRunner> makeRunner(const std::string& task, const Variant& variant, const Options& o,
+                                        const success::World& world) {
+  auto runner = std::make_unique<TrialRunner>(task, variant, o.overrides, world, o.contact_margin, o.contact_softness);
+  runner->setFixedLatency(o.fixed_latency);
+  runner->setSensed(o.sensed);
+  if (o.feedback_scale >= 0) runner->setFeedbackScale(o.feedback_scale);
+  if (o.compensation != "task") runner->setCompensation(o.compensation == "on");
+  runner->setPrintEvents(o.print_events);
+  runner->setIdle(o.idle);
+  runner->setParams(o.paramsOf(task));
+  runner->setPoolParams(o.pool_ilqg);
+  return runner;
+}
+
+std::vector<TrialSpec> trialsOf(const std::string& task, const Options& o, const success::World& world) {
+  auto specs = makeTrials(task, o.trials, o.seed, world);
+  if (o.only_trial >= 0) specs = {specs[o.only_trial]};
+  return specs;
+}
+
+// Relocation's baseline: a ball left at the hold position misses every goal by this much.
+void printRelocateBaseline(const std::vector<TrialSpec>& specs, const Options& o) {
+  const Eigen::Vector3d hold = paramVector3("relocate", defaultTaskParams("relocate"), "hold_position");
+  double nearest = 1e9, farthest = 0;
+  for (const auto& spec : specs) {
+    nearest = std::min(nearest, (spec.goal - hold).norm());
+    farthest = std::max(farthest, (spec.goal - hold).norm());
+  }
+  std::printf("relocate: goals %.3f-%.3f m from the hold position (a ball left there misses every one)\n", nearest,
+              farthest);
+  if (o.poolsRun()) printShoulderBound(adroit::description::sceneFile(descriptionShareDir(), "ball", false));
+}
+
+void printTableHeader() {
   std::printf("%-9s %-14s %9s %12s %12s %10s %9s %12s\n", "task", "variant", "success", "mean error", "keys/min",
               "plan ms", "diverged", "start [rad]");
-  std::map<std::string, std::map<std::string, double>> rate, keys_rate, speed;
-  for (const auto& task : tasks) {
-    auto specs = makeTrials(task, trials, seed);
-    if (only_trial >= 0) {
-      if (only_trial >= trials) {
-        std::fprintf(stderr, "mpc_success: --only-trial %d needs --trials > %d\n", only_trial, only_trial);
-        return 2;
-      }
-      specs = {specs[only_trial]};
-    }
-    if (task == "relocate") {  // the baseline: staying at the hold position
-      const Eigen::Vector3d hold = paramVector3(task, defaultTaskParams(task), "hold_position");
-      double nearest = 1e9, farthest = 0;
-      for (const auto& spec : specs) {
-        nearest = std::min(nearest, (spec.goal - hold).norm());
-        farthest = std::max(farthest, (spec.goal - hold).norm());
-      }
-      std::printf("relocate: goals %.3f-%.3f m from the hold position (a ball left there misses every one)\n",
-                  nearest, farthest);
-      for (const auto& variant : variants)
-        if (variant.pneumatic) {
-          printShoulderBound(adroit::description::sceneFile(descriptionShareDir(), "ball", false));
-          break;
-        }
-    }
-    // Paired trials: trial k runs under every variant before trial k + 1 does, so a change in
-    // this shared machine's speed during the run falls on all variants alike (run in blocks, the
-    // variant run last would take all of a slowdown).
-    struct Tally {
-      int ok = 0, diverged = 0, keys_ok = 0, keys_all = 0, unasked = 0, unasked_trials = 0;
-      double error_sum = 0, typing_time = 0;
-      std::vector<double> plan_ms, start_errors;
-      std::array<std::vector<double>, 5> phase_ms;
-      void add(const TrialResult& r) {
-        ok += r.success;
-        diverged += r.diverged;
-        error_sum += r.final_error;
-        keys_ok += r.keys_correct;
-        keys_all += r.keys_total;
-        unasked += r.unasked;
-        unasked_trials += r.unasked > 0;
-        typing_time += r.duration;
-        plan_ms.push_back(r.plan_ms_median);
-        start_errors.push_back(r.start_error_median);
-        for (std::size_t k = 0; k < phase_ms.size(); ++k) phase_ms[k].push_back(r.phase_ms_median[k]);
-      }
-    };
-    std::vector<std::unique_ptr<TrialRunner>> runners;
-    std::vector<Tally> tallies(variants.size());
-    for (const auto& variant : variants) {
-      runners.push_back(std::make_unique<TrialRunner>(task, variant, overrides, contact_margin, contact_softness));
-      TrialRunner& runner = *runners.back();
-      runner.setFixedLatency(fixed_latency);
-      runner.setSensed(sensed);
-      if (feedback_scale >= 0) runner.setFeedbackScale(feedback_scale);
-      if (compensation != "task") runner.setCompensation(compensation == "on");
-      runner.setPrintEvents(print_events);
-      runner.setIdle(idle);
-      runner.setParams(params);
-      runner.setPoolParams(pool_ilqg);
-    }
-    for (const auto& spec : specs) {
-      for (std::size_t v = 0; v < variants.size(); ++v) {
-        const Variant& variant = variants[v];
-        TrialRunner& runner = *runners[v];
-        runner.resetTrace();
-        if (print_events && task == "type")
-          std::printf("%s %s trial %d: keys %s\n", task.c_str(), variant.name.c_str(), spec.index, spec.keys.c_str());
-        else if (print_events)
-          std::printf("%s %s trial %d: object %.3f %.3f %.3f, goal %.3f %.3f %.3f\n", task.c_str(),
-                      variant.name.c_str(), spec.index, spec.object_start.x(), spec.object_start.y(),
-                      spec.object_start.z(), spec.goal.x(), spec.goal.y(), spec.goal.z());
-        const TrialResult r = runner.run(spec);
-        if (print_events)
-          std::printf("  end: error %.4f m%s\n", r.final_error, r.success ? " (success)" : "");
-        tallies[v].add(r);
-        trials_csv << task << "," << variant.name << "," << spec.index << "," << r.success << "," << r.final_error << ","
-                   << (r.lowest_z > 1e8 ? 0 : r.lowest_z) << "," << r.farthest_from_grasp << "," << r.keys_correct << "," << r.keys_total << ","
-                   << r.duration << "," << r.plan_ms_median << "," << r.diverged << "," << r.unasked << "\n";
-        if (&spec == &specs.front()) {
-          for (const auto& [time, e] : r.trace) traces_csv << task << "," << variant.name << "," << time << "," << e << "\n";
-          runner.writeStates(out_dir + "/states_" + task + "_" + variant.name + ".csv", r);
-          runner.writeForces(out_dir + "/forces_" + task + "_" + variant.name + ".csv");
-        }
-        std::fflush(stdout);
-      }
-    }
-    for (std::size_t v = 0; v < variants.size(); ++v) {
-      const Variant& variant = variants[v];
-      const TrialRunner& runner = *runners[v];
-      const Tally& t = tallies[v];
-      rate[task][variant.name] = static_cast<double>(t.ok) / specs.size();
-      if (task == "type") {
-        keys_rate[task][variant.name] = t.keys_all ? static_cast<double>(t.keys_ok) / t.keys_all : 0;
-        speed[task][variant.name] = t.typing_time > 0 ? 60.0 * t.keys_ok / t.typing_time : 0;
-      }
-      std::printf("%-9s %-14s %5d/%-3zu %12.4f %12s %10.1f %9d %12.3f\n", task.c_str(), variant.name.c_str(), t.ok,
-                  specs.size(), t.error_sum / specs.size(),
-                  task == "type" ? std::to_string(static_cast<int>(std::lround(speed[task][variant.name]))).c_str() : "-",
-                  adroit::percentile(t.plan_ms, 50), t.diverged, adroit::percentile(t.start_errors, 50));
-      std::printf("%-9s %-14s plan ms, table 6.2 split (median over trials): rollout %.1f, derivatives %.1f, cost %.1f, "
-                  "backward %.1f, line search %.1f\n",
-                  "", "", adroit::percentile(t.phase_ms[0], 50), adroit::percentile(t.phase_ms[1], 50),
-                  adroit::percentile(t.phase_ms[2], 50), adroit::percentile(t.phase_ms[3], 50),
-                  adroit::percentile(t.phase_ms[4], 50));
-      if (task == "type" && idle > 0)
-        std::printf("%-9s %-14s at rest for %.1f s before each sequence: %d key(s) typed unasked, in %d of %zu trials\n",
-                    "", "", idle, t.unasked, t.unasked_trials, specs.size());
-      if (variant.pneumatic) {
-        std::printf("%-9s %-14s pools: %.2f ms per 5 ms tick for %zu cylinders (median, one core)\n", "", "",
-                    1e3 * runner.poolTickMedian(), runner.cylinders());
-        std::printf("%-9s %-14s force tracking, sensed vs planned tension, RMSE N (the demo's figure), against\n"
-                    "%-9s %-14s the floor: a cylinder that learns of each reference at the tick it is given, races at\n"
-                    "%-9s %-14s the command limit after %.0f ms (tube delay and pressure sensing) and stops on it\n"
-                    "%-9s %-14s exactly, and per tick: one command per %.0f ms pool tick, chosen with an exact model;\n"
-                    "%-9s %-14s preview: the reference given 5 / 10 / 20 ms earlier against the one given now\n",
-                    "", "", "", "", "", "", 1e3 * runner.auditDeadTime(), "", "", 1e3 * TrialRunner::poolPeriod(), "",
-                    "");
-        std::printf("%-9s %-14s   %-6s %6s %6s %8s %10s %8s %20s\n", "", "", "group", "RMSE", "floor", "per tick",
-                    "RMSE/tick", "max ref", "preview 5/10/20 ms");
-        const auto preview = runner.previewError();
-        for (const auto& [group, f] : runner.forceTracking()) {
-          char ahead[64] = "-";
-          if (preview.count(group) && preview.at(group).size() == 3 && std::isfinite(preview.at(group)[0]))
-            std::snprintf(ahead, sizeof ahead, "%.2f / %.2f / %.2f", preview.at(group)[0], preview.at(group)[1],
-                          preview.at(group)[2]);
-          std::printf("%-9s %-14s   %-6s %6.2f %6.2f %8.2f %10.2f %8.1f %20s\n", "", "", group.c_str(), f.rmse, f.floor,
-                      f.per_tick, f.per_tick > 0 ? f.rmse / f.per_tick : 0.0, f.max_reference, ahead);
-        }
-      }
+}
+
+void printTrialStart(const std::string& task, const Variant& variant, const TrialSpec& spec) {
+  if (task == "type")
+    std::printf("%s %s trial %d: keys %s\n", task.c_str(), variant.name.c_str(), spec.index, spec.keys.c_str());
+  else
+    std::printf("%s %s trial %d: object %.3f %.3f %.3f, goal %.3f %.3f %.3f\n", task.c_str(), variant.name.c_str(),
+                spec.index, spec.object_start.x(), spec.object_start.y(), spec.object_start.z(), spec.goal.x(),
+                spec.goal.y(), spec.goal.z());
+}
+
+// The pools' CPU and the force tracking of a pneumatic variant, against the plant's floors.
+void printPoolAudit(const TrialRunner& runner) {
+  std::printf("%-9s %-14s pools: %.2f ms per 5 ms tick for %zu cylinders (median, one core)\n", "", "",
+              1e3 * runner.poolTickMedian(), runner.cylinders());
+  std::printf("%-9s %-14s force tracking, sensed vs planned tension, RMSE N (the demo's figure), against\n"
+              "%-9s %-14s the floor: a cylinder that learns of each reference at the tick it is given, races at\n"
+              "%-9s %-14s the command limit after %.0f ms (tube delay and pressure sensing) and stops on it\n"
+              "%-9s %-14s exactly, and per tick: one command per %.0f ms pool tick, chosen with an exact model;\n"
+              "%-9s %-14s preview: the reference given 5 / 10 / 20 ms earlier against the one given now\n",
+              "", "", "", "", "", "", 1e3 * runner.auditDeadTime(), "", "", 1e3 * TrialRunner::poolPeriod(), "", "");
+  std::printf("%-9s %-14s   %-6s %6s %6s %8s %10s %8s %20s\n", "", "", "group", "RMSE", "floor", "per tick",
+              "RMSE/tick", "max ref", "preview 5/10/20 ms");
+  const auto preview = runner.previewError();
+  for (const auto& [group, f] : runner.forceTracking()) {
+    char ahead[64] = "-";
+    if (preview.count(group) && preview.at(group).size() == 3 && std::isfinite(preview.at(group)[0]))
+      std::snprintf(ahead, sizeof ahead, "%.2f / %.2f / %.2f", preview.at(group)[0], preview.at(group)[1],
+                    preview.at(group)[2]);
+    std::printf("%-9s %-14s   %-6s %6.2f %6.2f %8.2f %10.2f %8.1f %20s\n", "", "", group.c_str(), f.rmse, f.floor,
+                f.per_tick, f.per_tick > 0 ? f.rmse / f.per_tick : 0.0, f.max_reference, ahead);
+  }
+}
+
+void printVariant(const std::string& task, const Variant& variant, const Tally& t, const TrialRunner& runner,
+                  const Options& o) {
+  const std::size_t n = static_cast<std::size_t>(t.n);
+  std::printf("%-9s %-14s %5d/%-3zu %12.4f %12s %10.1f %9d %12.3f\n", task.c_str(), variant.name.c_str(), t.ok, n,
+              t.error_sum / n,
+              task == "type" ? std::to_string(static_cast<int>(std::lround(t.keysPerMinute()))).c_str() : "-",
+              adroit::percentile(t.plan_ms, 50), t.diverged, adroit::percentile(t.start_errors, 50));
+  std::printf("%-9s %-14s plan ms, table 6.2 split (median over trials): rollout %.1f, derivatives %.1f, cost %.1f, "
+              "backward %.1f, line search %.1f\n",
+              "", "", adroit::percentile(t.phase_ms[0], 50), adroit::percentile(t.phase_ms[1], 50),
+              adroit::percentile(t.phase_ms[2], 50), adroit::percentile(t.phase_ms[3], 50),
+              adroit::percentile(t.phase_ms[4], 50));
+  if (task == "type")  // a wrong key backspaced still counts as right in keys right, not here
+    std::printf("%-9s %-14s presses %d, wrong presses %d (%.1f %%), keys right %d/%d, keys typed unasked %d\n", "",
+                "", t.presses, t.wrong_presses, t.wrongPercent(), t.keys_ok, t.keys_all, t.unasked);
+  if (task == "type" && o.idle > 0)
+    std::printf("%-9s %-14s at rest for %.1f s before each sequence: %d key(s) typed unasked, in %d of %zu trials\n",
+                "", "", o.idle, t.unasked, t.unasked_trials, n);
+  if (variant.pneumatic) printPoolAudit(runner);
+  std::fflush(stdout);
+}
+
+// Every variant on the task's trials, paired: trial k runs under every variant before trial
+// k + 1 does, so a change in this shared machine's speed during the run falls on all variants
+// alike (run in blocks, the variant run last would take all of a slowdown). Prints a row per
+// variant; returns the tallies in variant order.
+std::vector<Tally> runTask(const std::string& task, const Options& o, const success::World& world, Outputs& out) {
+  const auto specs = trialsOf(task, o, world);
+  if (task == "relocate") printRelocateBaseline(specs, o);
+  std::vector<std::unique_ptr<TrialRunner>> runners;
+  for (const auto& variant : o.variants) runners.push_back(makeRunner(task, variant, o, world));
+  std::vector<Tally> tallies(o.variants.size());
+  for (const auto& spec : specs) {
+    for (std::size_t v = 0; v < o.variants.size(); ++v) {
+      runners[v]->resetTrace();
+      if (o.print_events) printTrialStart(task, o.variants[v], spec);
+      const TrialResult r = runners[v]->run(spec);
+      if (o.print_events) std::printf("  end: error %.4f m%s\n", r.final_error, r.success ? " (success)" : "");
+      tallies[v].add(r);
+      out.record(task, o.variants[v], spec, r, *runners[v], &spec == &specs.front());
       std::fflush(stdout);
     }
   }
-  for (const auto& task : sweep.empty() ? std::vector<std::string>{} : tasks) {
-    const auto specs = makeTrials(task, trials, seed);
+  for (std::size_t v = 0; v < o.variants.size(); ++v) printVariant(task, o.variants[v], tallies[v], *runners[v], o);
+  return tallies;
+}
+
+// --latency-sweep: iLQG on every task again at each fixed planning latency.
+void runLatencySweep(const Options& o, std::ofstream& trials_csv) {
+  for (const auto& task : o.latency_sweep.empty() ? std::vector<std::string>{} : o.tasks) {
+    const auto specs = makeTrials(task, o.trials, o.seed, o.world);
     std::printf("\n%s, iLQG, success against a fixed planning latency (simulated s per optimisation):\n",
                 task.c_str());
-    TrialRunner runner(task, known.at("ilqg"), overrides, contact_margin, contact_softness);
-    runner.setParams(params);
-    if (compensation != "task") runner.setCompensation(compensation == "on");
-    if (feedback_scale >= 0) runner.setFeedbackScale(feedback_scale);
-    for (const auto& value : sweep) {
+    TrialRunner runner(task, knownVariants().at("ilqg"), o.overrides, o.world, o.contact_margin, o.contact_softness);
+    runner.setParams(o.paramsOf(task));
+    if (o.compensation != "task") runner.setCompensation(o.compensation == "on");
+    if (o.feedback_scale >= 0) runner.setFeedbackScale(o.feedback_scale);
+    for (const auto& value : o.latency_sweep) {
       const double latency = std::atof(value.c_str());
       runner.setFixedLatency(latency);
       int ok = 0, keys_ok = 0, keys_all = 0;
@@ -1068,8 +1238,9 @@ int main(int argc, char** argv) {
         keys_ok += r.keys_correct;
         keys_all += r.keys_total;
         trials_csv << task << ",latency_" << value << "," << spec.index << "," << r.success << "," << r.final_error
-                   << "," << (r.lowest_z > 1e8 ? 0 : r.lowest_z) << "," << r.farthest_from_grasp << "," << r.keys_correct << "," << r.keys_total << ","
-                   << r.duration << "," << 1e3 * latency << "," << r.diverged << "," << r.unasked << "\n";
+                   << "," << (r.lowest_z > 1e8 ? 0 : r.lowest_z) << "," << r.farthest_from_grasp << ","
+                   << r.keys_correct << "," << r.keys_total << "," << r.duration << "," << 1e3 * latency << ","
+                   << r.diverged << "," << r.unasked << "\n";
       }
       if (task == "type")
         std::printf("  latency %5.0f ms: %d/%zu sequences, %d/%d keys\n", 1e3 * latency, ok, specs.size(), keys_ok,
@@ -1079,52 +1250,165 @@ int main(int argc, char** argv) {
       std::fflush(stdout);
     }
   }
-  trials_csv.close();
-  traces_csv.close();
+}
 
-  // plot_success.py is installed next to this program.
-  const std::string script = std::filesystem::read_symlink("/proc/self/exe").parent_path() / "plot_success.py";
-  const auto plot = adroit::runProgram({"python3", script, out_dir}, adroit::ProgramOptions{});
-  if (!plot.ok()) std::printf("\n(plotting failed: %s)\n", plot.describe().c_str());
-  else std::printf("\nplots: %s/success_<task>.png\n", out_dir.c_str());
+void result(const std::string& name, double value, const char* unit, const char* op, double target) {
+  const bool pass = std::strcmp(op, ">=") == 0 ? value >= target : value <= target;
+  std::printf("RESULT adroit_mpc/%s %.2f %s target %s %.2f %s\n", name.c_str(), value, unit, op, target,
+              pass ? "PASS" : "FAIL");
+}
 
-  std::printf("\n");
-  const auto result = [](const std::string& name, double value, const char* unit, const char* op, double target) {
-    const bool pass = std::strcmp(op, ">=") == 0 ? value >= target : value <= target;
-    std::printf("RESULT adroit_mpc/%s %.2f %s target %s %.2f %s\n", name.c_str(), value, unit, op, target,
-                pass ? "PASS" : "FAIL");
+// A figure in percent against a whole-number target ("... 93.3 % target >= 90 PASS").
+void resultPercent(const std::string& name, double percent, const char* op, double target) {
+  const bool pass = std::strcmp(op, ">=") == 0 ? percent >= target : percent <= target;
+  std::printf("RESULT adroit_mpc/%s %.1f %% target %s %g %s\n", name.c_str(), percent, op, target,
+              pass ? "PASS" : "FAIL");
+}
+
+using TaskTallies = std::map<std::string, std::vector<Tally>>;  // task -> per variant (Options order)
+
+const Tally& tallyOf(const TaskTallies& tallies, const Options& o, const std::string& task, const std::string& name) {
+  for (std::size_t v = 0; v < o.variants.size(); ++v)
+    if (o.variants[v].name == name) return tallies.at(task)[v];
+  throw std::logic_error("no variant " + name);
+}
+
+// The RESULT lines of the run without --sweep. The issue's figures are in pneumatic mode (the
+// pools tracking the plan); without that variant the force-mode iLQG figures stand in (and say so).
+void printResults(const Options& o, const TaskTallies& tallies) {
+  const auto ratio = [&](const std::string& task, const std::string& variant) {
+    const Tally& t = tallyOf(tallies, o, task, variant);
+    return task == "type" ? t.keysRate() : t.successRate();
   };
-  // The issue's figures are in pneumatic mode (the pools tracking the plan); without that
-  // variant the force-mode iLQG figures stand in (and say so).
-  const auto has = [&](const char* name) {
-    return std::any_of(variants.begin(), variants.end(), [&](const Variant& v) { return v.name == name; });
-  };
-  const std::string primary = has("pneumatic") ? "pneumatic" : has("ilqg") ? "ilqg" : "";
+  const std::string primary = o.has("pneumatic") ? "pneumatic" : o.has("ilqg") ? "ilqg" : "";
   if (!primary.empty()) {
     const std::string suffix = primary == "pneumatic" ? "" : "_force_mode";
     const std::map<std::string, std::pair<std::string, double>> figure = {
         {"catch", {"catch_success_rate", 0.8}}, {"relocate", {"relocate_success_rate", 0.8}},
         {"type", {"typing_keys_correct_rate", 0.9}}};
-    for (const auto& task : tasks) {
-      const double value = task == "type" ? keys_rate[task][primary] : rate[task][primary];
-      result(figure.at(task).first + suffix, value, "ratio", ">=", figure.at(task).second);
-    }
+    for (const auto& task : o.tasks)
+      result(figure.at(task).first + suffix, ratio(task, primary), "ratio", ">=", figure.at(task).second);
   }
-  if (has("as_planned") && has("ilqg")) {  // how much of the shortfall is the planning model's
-    for (const auto& task : tasks) {
-      const auto& table = task == "type" ? keys_rate : rate;
+  if (o.has("as_planned") && o.has("ilqg")) {  // how much of the shortfall is the planning model's
+    for (const auto& task : o.tasks)
       std::printf("%s: iLQG %.2f against the physical world, %.2f against a world that is its planning model%s\n",
-                  task.c_str(), table.at(task).at("ilqg"), table.at(task).at("as_planned"),
+                  task.c_str(), ratio(task, "ilqg"), ratio(task, "as_planned"),
                   task == "type" ? "" : " (pruned contacts: no oracle for an object task)");
-    }
   }
-  if (has("pneumatic") && has("ilqg")) {  // chapter 7's claim: the pools make cylinders force actuators
-    for (const auto& task : tasks) {
-      const auto& table = task == "type" ? keys_rate : rate;
-      const double force = table.at(task).at("ilqg"), pneumatic = table.at(task).at("pneumatic");
+  if (o.has("pneumatic") && o.has("ilqg")) {  // chapter 7's claim: the pools make cylinders force actuators
+    for (const auto& task : o.tasks) {
+      const double force = ratio(task, "ilqg"), pneumatic = ratio(task, "pneumatic");
       result(task + "_pneumatic_over_force", force > 0 ? pneumatic / force : 0.0, "ratio", ">=", 0.9);
     }
   }
+  if (tallies.count("type"))  // issue 38: wrong presses at most 10 % of all presses, in both modes
+    for (std::size_t v = 0; v < o.variants.size(); ++v)
+      resultPercent("type_" + o.variants[v].name + "_wrong_press_percent", tallies.at("type")[v].wrongPercent(),
+                    "<=", 10);
+}
+
+void printHeader(const Options& o) {
+  std::printf("Behaviour MPC success, %d trial(s) per task, emulated real time on this machine (seed %u)\n", o.trials,
+              o.seed);
+  if (const std::string world = success::describe(o.world); !world.empty())
+    std::printf("world, beyond the tasks' tuning: %s\n", world.c_str());
+  std::printf("\n");
+}
+
+// The run without --sweep: the table, the CSVs, the plots, the RESULT lines.
+int runDefault(const Options& o) {
+  Outputs out;
+  if (!out.open(o.out_dir, false)) {
+    std::fprintf(stderr, "mpc_success: cannot write into %s\n", o.out_dir.c_str());
+    return 2;
+  }
+  printTableHeader();
+  TaskTallies tallies;
+  for (const auto& task : o.tasks) tallies[task] = runTask(task, o, o.world, out);
+  runLatencySweep(o, out.trials);
+  out.trials.close();
+  out.traces.close();
+  out.presses.close();
+
+  // plot_success.py is installed next to this program.
+  const std::string script = std::filesystem::read_symlink("/proc/self/exe").parent_path() / "plot_success.py";
+  const auto plot = adroit::runProgram({"python3", script, o.out_dir}, adroit::ProgramOptions{});
+  if (!plot.ok()) std::printf("\n(plotting failed: %s)\n", plot.describe().c_str());
+  else std::printf("\nplots: %s/success_<task>.png\n", o.out_dir.c_str());
+  std::printf("\n");
+  printResults(o, tallies);
   return 0;
 }
 
+// One sweep's success per task and variant across its values, then a RESULT line per point.
+struct SweepTable {
+  success::Sweep sweep;
+  std::vector<TaskTallies> points;  // per value
+};
+
+void printSweepTable(const SweepTable& s, const Options& o) {
+  std::printf("\nsuccess across %s (%% of trials; type: %% of keys right; wrong presses in brackets)\n",
+              s.sweep.name.c_str());
+  std::printf("%-9s %-14s", "task", "variant");
+  for (const auto& value : s.sweep.values) std::printf(" %16s", value.c_str());
+  std::printf("\n");
+  for (const auto& task : o.tasks) {
+    for (const auto& variant : o.variants) {
+      std::printf("%-9s %-14s", task.c_str(), variant.name.c_str());
+      for (const auto& point : s.points) {
+        const Tally& t = tallyOf(point, o, task, variant.name);
+        char cell[40];
+        if (task == "type")
+          std::snprintf(cell, sizeof cell, "%.0f (%.0f)", t.successPercent(task), t.wrongPercent());
+        else
+          std::snprintf(cell, sizeof cell, "%.0f", t.successPercent(task));
+        std::printf(" %16s", cell);
+      }
+      std::printf("\n");
+    }
+  }
+}
+
+void printSweepResults(const SweepTable& s, const Options& o) {
+  for (std::size_t k = 0; k < s.sweep.values.size(); ++k)
+    for (const auto& task : o.tasks)
+      for (const auto& variant : o.variants)
+        resultPercent(task + "_" + variant.name + "_success_" + s.sweep.name + "_" + s.sweep.values[k],
+                      tallyOf(s.points[k], o, task, variant.name).successPercent(task), ">=", 90);
+}
+
+// --sweep: the tasks and variants again for each value of each swept option, the rest of the
+// world as the command line has it.
+int runSweeps(const Options& o) {
+  Outputs out;
+  if (!out.open(o.out_dir, true)) {
+    std::fprintf(stderr, "mpc_success: cannot write into %s\n", o.out_dir.c_str());
+    return 2;
+  }
+  std::vector<SweepTable> tables;
+  for (const auto& sweep : o.sweeps) {
+    tables.push_back({sweep, {}});
+    for (const auto& value : sweep.values) {
+      success::World world = o.world;
+      success::setWorldOption(world, sweep.name, value);  // checked by parseSweep
+      std::printf("\n%s = %s: %s\n", sweep.name.c_str(), value.c_str(), success::describe(world).c_str());
+      printTableHeader();
+      out.point = sweep.name + "," + value;
+      TaskTallies tallies;
+      for (const auto& task : o.tasks) tallies[task] = runTask(task, o, world, out);
+      tables.back().points.push_back(tallies);
+    }
+  }
+  for (const auto& table : tables) printSweepTable(table, o);
+  std::printf("\ntrials: %s/success_sweep.csv\n\n", o.out_dir.c_str());
+  for (const auto& table : tables) printSweepResults(table, o);
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const Options options = parseOptions(argc, argv);
+  printHeader(options);
+  return options.sweeps.empty() ? runDefault(options) : runSweeps(options);
+}

@@ -161,29 +161,33 @@ void applyPlanningSettings(mjModel* m, const PlanningModelSettings& s) {
       setSoftness(m->pair_solref + mjNREF * p, m->pair_solimp + mjNIMP * p, s.contact_softness, s.timestep);
   }
 
-  if (s.object_mass > 0 || s.object_size_scale != 1) {
-    const int body = mj_name2id(m, mjOBJ_BODY, "object");
-    if (body < 0)
-      throw std::invalid_argument("planning model: object_mass / object_size_scale set but the scene has no body 'object'");
-    const double size = s.object_size_scale;
-    const double mass_ratio = s.object_mass > 0 ? s.object_mass / m->body_mass[body] : 1.0;
-    m->body_mass[body] *= mass_ratio;
-    for (int k = 0; k < 3; ++k) {
-      m->body_inertia[3 * body + k] *= mass_ratio * size * size;
-      m->body_ipos[3 * body + k] *= size;
-    }
-    for (int g = 0; g < m->ngeom; ++g) {
-      if (m->geom_bodyid[g] != body) continue;
-      for (int k = 0; k < 3; ++k) {
-        m->geom_size[3 * g + k] *= size;
-        m->geom_pos[3 * g + k] *= size;
-      }
-      m->geom_rbound[g] *= size;
-    }
-    // Derived quantities that depend on masses (body_subtreemass, dof_invweight0...).
-    adroit::DataPtr scratch = adroit::makeData(m);
-    mj_setConst(m, scratch.get());
+  if ((s.object_mass > 0 || s.object_size_scale != 1) && !scaleObjectBody(m, s.object_mass, s.object_size_scale))
+    throw std::invalid_argument("planning model: object_mass / object_size_scale set but the scene has no body 'object'");
+}
+
+bool scaleObjectBody(mjModel* m, double mass, double size) {
+  if (!(mass >= 0) || !std::isfinite(mass) || !(size > 0) || !std::isfinite(size))
+    throw std::invalid_argument("object mass must be >= 0 and its size scale > 0");
+  const int body = mj_name2id(m, mjOBJ_BODY, "object");
+  if (body < 0) return false;
+  const double mass_ratio = mass > 0 ? mass / m->body_mass[body] : 1.0;
+  m->body_mass[body] *= mass_ratio;
+  for (int k = 0; k < 3; ++k) {
+    m->body_inertia[3 * body + k] *= mass_ratio * size * size;
+    m->body_ipos[3 * body + k] *= size;
   }
+  for (int g = 0; g < m->ngeom; ++g) {
+    if (m->geom_bodyid[g] != body) continue;
+    for (int k = 0; k < 3; ++k) {
+      m->geom_size[3 * g + k] *= size;
+      m->geom_pos[3 * g + k] *= size;
+    }
+    m->geom_rbound[g] *= size;
+  }
+  // Derived quantities that depend on masses (body_subtreemass, dof_invweight0...).
+  adroit::DataPtr scratch = adroit::makeData(m);
+  mj_setConst(m, scratch.get());
+  return true;
 }
 
 adroit::ModelPtr loadPlanningModel(const std::string& path, const PlanningModelSettings& settings) {

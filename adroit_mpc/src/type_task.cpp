@@ -118,6 +118,8 @@ void TypeTask::copyParametersFrom(const Task& other) {
   sequence_length_ = source->sequence_length_;
   matched_ = source->matched_;
   wrong_ = source->wrong_;
+  presses_ = source->presses_;
+  wrong_presses_ = source->wrong_presses_;
   held_ = source->held_;
   t_event_ = source->t_event_;
   t_observed_ = source->t_observed_;
@@ -329,6 +331,8 @@ bool TypeTask::setSequence(const std::string& keys, std::string* why) {
   sequence_length_ = static_cast<int>(keys.size());
   matched_ = 0;
   wrong_ = 0;
+  presses_ = 0;
+  wrong_presses_ = 0;
   t_event_ = t_observed_;
   return true;
 }
@@ -348,6 +352,8 @@ std::vector<TaskEvent> TypeTask::observe(const mjModel*, const mjData* d, double
     t_event_ = t;
     const Targets expected = targets();
     events.push_back({"key", labels_[k]});
+    ++presses_;
+    wrong_presses_ += k != expected.current;  // a backspace that removes a wrong key is expected
     if (k == expected.current) {
       if (wrong_ > 0) {
         --wrong_;

@@ -93,6 +93,33 @@ TEST(PlanningModel, ObjectOverridesScaleMassAndSize) {
   EXPECT_NEAR(m->body_inertia[3 * body], ratio * base->body_inertia[3 * body], 1e-12);
 }
 
+// The simulated world's object changes as the planning model's does (mpc_success --object-mass,
+// --object-scale), with the derived constants: the world's total mass follows the object's.
+TEST(PlanningModel, ObjectScalingOfTheSimulatedWorldMatchesThePlanningModels) {
+  PlanningModelSettings s;
+  s.object_mass = 0.5;
+  s.object_size_scale = 1.2;
+  auto planning = loadPlanningModel(bottleFile(), s);
+  const std::string world_file = adroit::description::sceneFile(descriptionShareDir(), "bottle", false);
+  auto base = adroit::loadModelFile(world_file).model;
+  auto world = adroit::loadModelFile(world_file).model;
+  ASSERT_TRUE(scaleObjectBody(world.get(), 0.5, 1.2));
+  const int body = mj_name2id(world.get(), mjOBJ_BODY, "object");
+  const int geom = mj_name2id(world.get(), mjOBJ_GEOM, "C_object");
+  const int plan_body = mj_name2id(planning.get(), mjOBJ_BODY, "object");
+  const int plan_geom = mj_name2id(planning.get(), mjOBJ_GEOM, "C_object");
+  EXPECT_DOUBLE_EQ(world->body_mass[body], planning->body_mass[plan_body]);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_DOUBLE_EQ(world->geom_size[3 * geom + k], planning->geom_size[3 * plan_geom + k]) << k;
+    EXPECT_DOUBLE_EQ(world->body_inertia[3 * body + k], planning->body_inertia[3 * plan_body + k]) << k;
+  }
+  EXPECT_NEAR(world->body_subtreemass[0] - base->body_subtreemass[0], 0.5 - base->body_mass[body], 1e-12);
+  auto hand = adroit::loadModelFile(adroit::description::sceneFile(descriptionShareDir(), "hand", false)).model;
+  EXPECT_FALSE(scaleObjectBody(hand.get(), 0.5, 1.0));  // no object: nothing changed
+  EXPECT_THROW(scaleObjectBody(world.get(), -1, 1.0), std::invalid_argument);
+  EXPECT_THROW(scaleObjectBody(world.get(), 0, 0.0), std::invalid_argument);
+}
+
 TEST(PlanningModel, TendonForcesStartAtTheRobotsMinimumTension) {
   PlanningModelSettings s;
   s.min_tension = 0;

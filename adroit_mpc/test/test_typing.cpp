@@ -120,6 +120,34 @@ TEST_F(Typing, WrongKeyIsCorrectedWithBackspace) {
   EXPECT_EQ(task->currentTarget(), "");
 }
 
+// Keys right forgives a wrong key once backspaced; the press count keeps it: 4 8 bs 7 for "47"
+// is every key right in four presses, one of them wrong (the backspace that removes it is not).
+TEST_F(Typing, AWrongKeyFixedByBackspaceStaysAWrongPress) {
+  std::string why;
+  ASSERT_TRUE(task->setSequence("47", &why));
+  tap("4", 0.1);
+  tap("8", 0.2);
+  tap("bs", 0.3);
+  tap("7", 0.4);
+  EXPECT_EQ(task->typedCorrectly(), 2);
+  EXPECT_EQ(task->presses(), 4);
+  EXPECT_EQ(task->wrongPresses(), 1);
+  // A backspace that deletes a right key, and one on nothing typed, are wrong presses too.
+  ASSERT_TRUE(task->setSequence("12", &why));
+  EXPECT_EQ(task->presses(), 0);  // a new sequence counts afresh
+  tap("bs", 0.5);
+  tap("1", 0.6);
+  tap("bs", 0.7);
+  EXPECT_EQ(task->typedCorrectly(), 0);
+  EXPECT_EQ(task->presses(), 3);
+  EXPECT_EQ(task->wrongPresses(), 2);
+  TypeTask copy;  // the planner's copy of the task carries the counts (copyParametersFrom)
+  copy.bind(m, 5);
+  copy.copyParametersFrom(*task);
+  EXPECT_EQ(copy.presses(), 3);
+  EXPECT_EQ(copy.wrongPresses(), 2);
+}
+
 TEST_F(Typing, TwoWrongKeysNeedTwoBackspaces) {
   std::string why;
   ASSERT_TRUE(task->setSequence("5", &why));

@@ -6,7 +6,9 @@ mode, the five pools share its cores), then random 10-digit sequences on /adroit
 Per mode, in its own roslaunch: after a start-up, `--idle` seconds without a sequence (a key
 registered then was typed unasked), then each sequence, given 1.55 s per key (mpc_success allows
 1.5) or until the node reports it done. Keys right: the sequence's keys typed in order, after
-replaying the backspaces, as mpc_success counts them. The MPC's iteration time and policy age
+replaying the backspaces, as mpc_success counts them; wrong presses: presses of a key other than
+the one expected next, a wrong key later backspaced included (presses_and_wrong, as the typing task
+counts them and mpc_success reports them). The MPC's iteration time and policy age
 are the node's diagnostics. Writes typing_through_node.csv and .png to --out; ends with RESULT
 lines. mpc_success measures the planner with the cores to itself; this is the node beside the
 driver and the pools.
@@ -42,6 +44,34 @@ def keys_right(typed, sequence):
             break
         right += 1
     return right
+
+
+def presses_and_wrong(typed, sequence):
+    """(presses, wrong presses) as the typing task counts them (TypeTask::presses, wrongPresses):
+    every key is a press; a press is wrong when it is not the key expected next with the
+    auto-correction replayed (after a wrong key backspace is expected, then the intended key).
+    A wrong key later removed by backspace stays a wrong press; the backspace removing it is not
+    one, a backspace deleting a right key or nothing is."""
+    matched = pending = wrong = 0
+    for key in typed:
+        expected = "bs" if pending else (sequence[matched] if matched < len(sequence) else None)
+        if key == expected:
+            if pending:
+                pending -= 1
+            else:
+                matched += 1
+            continue
+        wrong += 1
+        if key == "bs":
+            matched = max(matched - 1, 0)  # deletes a right key, or nothing
+        else:
+            pending += 1
+    return len(typed), wrong
+
+
+def wrong_percent(presses, wrong):
+    """Wrong presses in % of all presses (0 without a press)."""
+    return 100.0 * wrong / presses if presses else 0.0
 
 
 def probe(idle, sequences_arg):
@@ -94,7 +124,8 @@ def probe(idle, sequences_arg):
         with lock:
             got = [k for t, k in typed if t >= t0]
         right = keys_right(got, sequence)
-        results.append({"sequence": sequence, "typed": got, "right": right,
+        presses, wrong = presses_and_wrong(got, sequence)
+        results.append({"sequence": sequence, "typed": got, "right": right, "presses": presses, "wrong": wrong,
                         "seconds": (done_at or time.time()) - t0, "done": done_at is not None})
         time.sleep(1.0)  # the hand settles before the next sequence
     with lock:
@@ -126,30 +157,37 @@ def main():
             right = sum(s["right"] for s in r["sequences"])
             total = sum(len(s["sequence"]) for s in r["sequences"])
             seconds = sum(s["seconds"] for s in r["sequences"])
+            presses = sum(s["presses"] for s in r["sequences"])
+            wrong = sum(s["wrong"] for s in r["sequences"])
             summary.append((mode, len(r["unasked"]), right, total, 60.0 * right / max(seconds, 1e-9),
-                            percentile(r["iteration_ms"], 0.5), percentile(r["policy_age_ms"], 0.5)))
+                            percentile(r["iteration_ms"], 0.5), percentile(r["policy_age_ms"], 0.5), presses, wrong))
             for s in r["sequences"]:
                 rows.append([mode, s["sequence"], " ".join(s["typed"]), s["right"], len(s["sequence"]),
-                             "%.2f" % s["seconds"], s["done"]])
-                print("%s: %s -> %s (%d right, %.1f s%s)" % (mode, s["sequence"], " ".join(s["typed"]), s["right"],
-                                                           s["seconds"], ", done" if s["done"] else ""), flush=True)
+                             s["presses"], s["wrong"], "%.2f" % s["seconds"], s["done"]])
+                print("%s: %s -> %s (%d right, %d of %d presses wrong, %.1f s%s)" % (
+                    mode, s["sequence"], " ".join(s["typed"]), s["right"], s["wrong"], s["presses"], s["seconds"],
+                    ", done" if s["done"] else ""), flush=True)
     print("\n== typing through the node (sim.launch task:=type), %d sequences of 10 digits, %.0f s idle first =="
           % (len(sequences), args.idle))
-    print("%-10s %14s %12s %10s %18s %16s" % ("mode", "typed unasked", "keys right", "keys/min",
-                                             "MPC iteration ms", "policy age ms"))
-    for mode, unasked, right, total, per_min, it, age in summary:
-        print("%-10s %14d %8d/%-3d %10.0f %18.1f %16.1f" % (mode, unasked, right, total, per_min, it, age))
+    print("%-10s %14s %12s %20s %10s %18s %16s" % ("mode", "typed unasked", "keys right", "wrong presses",
+                                                   "keys/min", "MPC iteration ms", "policy age ms"))
+    for mode, unasked, right, total, per_min, it, age, presses, wrong in summary:
+        print("%-10s %14d %8d/%-3d %8d/%-4d (%3.0f %%) %10.0f %18.1f %16.1f" % (
+            mode, unasked, right, total, wrong, presses, wrong_percent(presses, wrong), per_min, it, age))
     with open(os.path.join(args.out, "typing_through_node.csv"), "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["mode", "sequence", "typed", "right", "keys", "seconds", "done"])
+        w.writerow(["mode", "sequence", "typed", "right", "keys", "presses", "wrong_presses", "seconds", "done"])
         w.writerows(rows)
     plot(summary, os.path.join(args.out, "typing_through_node.png"))
-    for mode, unasked, right, total, per_min, it, age in summary:
+    for mode, unasked, right, total, per_min, it, age, presses, wrong in summary:
         rate = right / total
         print("RESULT adroit_launch/typing_node_keys_correct_rate_%s %.2f ratio target >= 0.9 %s" %
               (mode, rate, "PASS" if rate >= 0.9 else "FAIL"))
         print("RESULT adroit_launch/typing_node_unasked_keys_%s %d count target == 0 %s" %
               (mode, unasked, "PASS" if unasked == 0 else "FAIL"))
+        percent = wrong_percent(presses, wrong)
+        print("RESULT adroit_launch/typing_node_wrong_press_percent_%s %.1f %% target <= 10 %s" %
+              (mode, percent, "PASS" if percent <= 10 else "FAIL"))
 
 
 def plot(summary, path):

@@ -41,6 +41,13 @@ struct PlanningModelSettings {
 // scene without a body "object").
 void applyPlanningSettings(mjModel* model, const PlanningModelSettings& settings);
 
+// Body "object" of a compiled model (the planning model's, or the simulated world's, so both
+// change alike): mass set to `mass` kg (0 keeps it; inertia scaled with it), its geoms' sizes
+// and positions and its centre of mass scaled by `size_scale` (inertia ~ s^2), the derived
+// constants recomputed. False, the model unchanged, when it has no body "object"; throws
+// std::invalid_argument for a negative mass or a non-positive scale.
+bool scaleObjectBody(mjModel* model, double mass, double size_scale);
+
 // The MJCF text of a model file: a regular file of at most 16 MB (adroit/bounded_file.h).
 // Throws adroit::ModelLoadError, naming the file, when it cannot be read.
 std::string readModelText(const std::string& path);

@@ -78,6 +78,12 @@ class TypeTask : public Task {
   std::string sequence() const { return std::string(sequence_.data(), sequence_length_); }
   int typedCorrectly() const { return matched_; }
   int pendingBackspaces() const { return wrong_; }
+  // Since the sequence was given: every registered press, and those of a key other than the
+  // one expected next with the auto-correction replayed (after a wrong key, backspace is
+  // expected). typedCorrectly() forgives a wrong key once it is backspaced; this count keeps
+  // it, so a run that reaches every key by typing and deleting wrong ones shows as such.
+  int presses() const { return presses_; }
+  int wrongPresses() const { return wrong_presses_; }
   // The S_up step of the current key at the present state of the typing.
   SmoothStep currentStep() const;
 
@@ -104,6 +110,7 @@ class TypeTask : public Task {
   int sequence_length_ = 0;
   int matched_ = 0;  // keys of the sequence typed correctly, in order
   int wrong_ = 0;    // wrong keys typed after them (each needs a backspace)
+  int presses_ = 0, wrong_presses_ = 0;  // since setSequence (presses(), wrongPresses())
   std::array<bool, kMaxKeys> held_{};
   double t_event_ = 0, t_observed_ = 0;
 

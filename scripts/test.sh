@@ -32,11 +32,11 @@ echo "sanitizer stage (ASan+UBSan build and gtests): $((SECONDS - sanitizer_star
 "$here/test_fuzz.sh" 60 || failed_commands+=("fuzz stage")
 
 # The workspace scripts' own tests (the result counting below; that no core library links a
-# ROS library; that no source starts a program through a shell), the real-time tests' machine probe guard and the
-# typing benchmark's press counting (launch/bench), one result file each, through
-# catkin's wrapper like every package test: no result file gives a MISSING failure.
+# ROS library; that no source starts a program through a shell), the real-time tests' machine probe guard, the
+# typing benchmark's press counting and the behaviour benchmark's options, totals and RESULT lines (launch/bench),
+# one result file each, through catkin's wrapper like every package test: no result file gives a MISSING failure.
 for t in scripts/test_count_results scripts/test_core_links scripts/test_no_shell src/adroit_core/tools/test_machine_probe \
-         launch/bench/test_typing_through_node; do
+         launch/bench/test_typing_through_node launch/bench/test_behaviour_through_launch; do
   name="$(basename "$t")"
   result="$WS_ROOT/build/workspace_scripts/test_results/workspace_scripts/pytest-$name.xml"
   python3 /usr/share/catkin/cmake/test/run_tests.py --return-code "$result" \

@@ -5,8 +5,8 @@ extra launch arguments, in alternating blocks of the same run (the machine is sh
 
 Each block is its own roslaunch on a random port. After a start-up, a probe finds every node's
 process through the master (getPid), reads each thread's CPU time from /proc over the window and
-sorts it by scheduling class: SCHED_FIFO (command paths), normal at nice 0 (ROS plumbing, tools),
-and niced (the MPC's optimiser and its workers, nice 19). It also takes the MPC's iteration time
+sorts it by scheduling class (stack_run.StackCpu): SCHED_FIFO (command paths), normal at nice 0
+(ROS plumbing, tools), and niced (the MPC's optimiser and its workers, nice 19). It also takes the MPC's iteration time
 from its diagnostics. The table gives per variant and block the cores each node used, the
 optimiser's share and the median iteration; stack_cpu.csv and stack_cpu.png go to --out.
 
@@ -21,41 +21,15 @@ import os
 import sys
 import time
 
-from stack_run import percentile, run_with_launch
+from stack_run import StackCpu, percentile, run_with_launch
 
 STARTUP_S = 18.0
-CLK_TCK = os.sysconf("SC_CLK_TCK")
-
-
-def thread_times(pids):
-    """{(node, tid): (cpu seconds, class)} for every thread of the given {node: pid}."""
-    out = {}
-    for node, pid in pids.items():
-        try:
-            tids = os.listdir("/proc/%d/task" % pid)
-        except OSError:
-            continue
-        for tid in tids:
-            try:
-                with open("/proc/%d/task/%s/stat" % (pid, tid)) as f:
-                    fields = f.read().rsplit(")", 1)[1].split()
-            except OSError:
-                continue
-            # fields[0] is stat's 3rd field: utime 14, stime 15, nice 19, policy 41.
-            cpu = (int(fields[11]) + int(fields[12])) / CLK_TCK
-            nice, policy = int(fields[16]), int(fields[38])
-            cls = "fifo" if policy in (1, 2) else ("niced" if nice > 0 else "normal")
-            out[(node, tid)] = (cpu, cls)
-    return out
 
 
 def probe(seconds):
     """Child process: CPU per node and class over the window, the MPC's iteration times; one JSON line."""
     import json
-    import xmlrpc.client
 
-    import rosgraph
-    import rosnode
     import rospy
     from diagnostic_msgs.msg import DiagnosticArray
 
@@ -72,36 +46,12 @@ def probe(seconds):
 
     rospy.Subscriber("/adroit/diagnostics", DiagnosticArray, on_diag, queue_size=20)
     time.sleep(STARTUP_S)
-    master = rosgraph.Master("/stack_cpu_probe")
-    pids = {}
-    for name in rosnode.get_node_names():
-        if name == rospy.get_name() or name == "/rosout":
-            continue
-        try:
-            code, _, pid = xmlrpc.client.ServerProxy(master.lookupNode(name)).getPid("/stack_cpu_probe")
-        except Exception:  # a node that went away or has no XML-RPC server
-            continue
-        if code == 1:
-            pids[name.lstrip("/")] = pid
-    pids["rosmaster"] = master.getPid()
-    start = thread_times(pids)
+    cpu = StackCpu(rospy.get_name())
+    cpu.start()
     recording[0] = True
     time.sleep(seconds)
     recording[0] = False
-    end = thread_times(pids)
-    # A nodelet's loader is a node of its own but a process of the manager's: count a pid once.
-    by_pid = {}
-    for node, pid in sorted(pids.items()):
-        by_pid.setdefault(pid, node)
-    cores = {}
-    for key, (cpu, cls) in end.items():
-        node = by_pid.get(pids[key[0]])
-        if node != key[0]:
-            continue
-        used = (cpu - start.get(key, (cpu, cls))[0]) / seconds
-        cores.setdefault(node, {}).setdefault(cls, 0.0)
-        cores[node][cls] += used
-    print(json.dumps({"cores": cores, "iteration_ms": iterations}), flush=True)
+    print(json.dumps({"cores": cpu.stop(), "iteration_ms": iterations}), flush=True)
 
 
 def main():

@@ -56,6 +56,16 @@ std::vector<std::pair<std::string, int>> parseAssignment(const std::string& text
 
 }  // namespace
 
+void approachFromAbove(double height, double radius, ResidualBuffer& buf) {
+  if (!(height > 0) || !(radius > 0)) return;
+  const double rho2 = buf.r[0] * buf.r[0] + buf.r[1] * buf.r[1], a2 = radius * radius;
+  buf.r[2] -= height * rho2 / (rho2 + a2);
+  if (!buf.uses_q) return;
+  // d lift / d r_xy = height * a2 / (rho2 + a2)^2 * 2 r_xy
+  const double slope = 2.0 * height * a2 / ((rho2 + a2) * (rho2 + a2));
+  buf.jq.row(2) -= slope * (buf.r[0] * buf.jq.row(0) + buf.r[1] * buf.jq.row(1));
+}
+
 const std::array<const char*, 5>& TypeTask::fingerNames() {
   static const std::array<const char*, 5> names = {"ff", "mf", "rf", "lf", "th"};
   return names;
@@ -69,13 +79,13 @@ const std::array<const char*, 5>& TypeTask::fingertipSites() {
 TaskParams TypeTask::defaults() {
   TaskParams p;
   p.strings = {{"scene", "keypad"}, {"sequence", ""}, {"finger_assignment", ""}, {"assignment_keyframe", "rest"}};
-  p.numbers = {{"w_press", 10.0},        {"w_approach", 20.0},       {"w_hover", 5.0},
+  p.numbers = {{"w_press", 1.0},        {"w_approach", 20.0},       {"w_hover", 5.0},
                {"w_other_keys", 5.0},    {"w_posture", 0.1},         {"w_control", 0.1},
-               {"w_synergy", 0.08},      {"terminal_scale", 5.0},    {"hover_height", 0.015},
+               {"w_synergy", 0.08},      {"terminal_scale", 5.0},    {"hover_height", 0.0225},
                {"approach_smoothing", 0.005}, {"key_period", 0.25}, {"min_lead", 1.0},
                {"step_smoothness", 0.03}, {"release_depth", 0.0035}, {"horizon", 0.2},
                {"planner_dt", 0.01},      {"derivative_skip", 3},    {"feedback_scale", 0.5},
-               {"latency_compensation", 1}};
+               {"latency_compensation", 1}, {"approach_radius", 0.004}};
   return p;
 }
 
@@ -96,6 +106,7 @@ TypeTask::TypeTask(const TaskParams& params) {
   min_lead_ = paramNumber(kTask, p, "min_lead", 0, 10);
   step_smoothness_ = paramNumber(kTask, p, "step_smoothness", 1e-4, 10);
   release_depth_ = paramNumber(kTask, p, "release_depth", 0, 0.1);
+  approach_radius_ = paramNumber(kTask, p, "approach_radius", 0, 0.1);
   horizon_hint_ = paramNumber(kTask, p, "horizon", 1e-3, 10);
   planner_dt_hint_ = paramNumber(kTask, p, "planner_dt", 1e-4, 1);
   paramNumber(kTask, p, "derivative_skip", 1, 100);  // planner hints, read by their users
@@ -410,6 +421,13 @@ double TypeTask::cost(const mjModel* m, const mjData* d, const Eigen::VectorXd* 
     pointResidual(m, d, fingertips_[key_finger_[k]], point, derivatives, buf);
     total += addResidualCost(scale * w, Norm::smoothAbs(approach_smoothing_), buf, out);
   };
+  // A fingertip onto a key top from above: the target rises to hover_height as the tip
+  // strays sideways (approachFromAbove), so the tip descends only over its key.
+  auto keyApproachTerm = [&](int k, double w) {
+    pointResidual(m, d, fingertips_[key_finger_[k]], key_tops_[k], derivatives, buf);
+    approachFromAbove(hover_height_, approach_radius_, buf);
+    total += addResidualCost(scale * w, Norm::smoothAbs(approach_smoothing_), buf, out);
+  };
 
   if (target.current != kNoKey) {
     const int c = target.current;
@@ -418,12 +436,12 @@ double TypeTask::cost(const mjModel* m, const mjData* d, const Eigen::VectorXd* 
       tipTerm(c, key_hovers_[c], weights_[w_approach_] * s_up);
     } else {
       keyTerm(c, key_travel_[c], weights_[w_press_] * s_up);
-      tipTerm(c, key_tops_[c], weights_[w_approach_] * s_up);
+      keyApproachTerm(c, weights_[w_approach_] * s_up);
     }
     if (target.next != kNoKey) {
       const int n = target.next;
       keyTerm(n, key_travel_[n], weights_[w_press_] * s_dn);
-      tipTerm(n, key_tops_[n], weights_[w_approach_] * s_dn);
+      keyApproachTerm(n, weights_[w_approach_] * s_dn);
       if (key_finger_[n] != key_finger_[c]) tipTerm(n, key_hovers_[n], weights_[w_hover_] * s_up);
     }
   }

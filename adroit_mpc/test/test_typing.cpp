@@ -238,6 +238,49 @@ TEST_F(Typing, CostRewardsTheTargetKeyAndPenalisesOthers) {
   EXPECT_GT(fresh->terminalCost(m, data.get(), 0.05, *scratch), idle);
 }
 
+// The key approach from above (approachFromAbove): over the key the target is its top; beside
+// it the target rises towards hover_height (half of it at approach_radius), with the Jacobian
+// of the lifted residual.
+TEST_F(Typing, KeyApproachTargetRisesBesideTheKey) {
+  const double height = 0.015, radius = 0.004;
+  adroit_mpc::ResidualBuffer buf(m, 6);
+  auto lifted = [&](const Eigen::Vector3d& r) {
+    buf.dim = 3;
+    buf.uses_q = false;
+    buf.r.head<3>() = r;
+    adroit_mpc::approachFromAbove(height, radius, buf);
+    return Eigen::Vector3d(buf.r.head<3>());
+  };
+  EXPECT_NEAR(lifted({0, 0, 0.002})[2], 0.002, 1e-12);                 // over the key: unchanged
+  EXPECT_NEAR(lifted({radius, 0, 0})[2], -height / 2, 1e-12);           // target half-way up
+  EXPECT_NEAR(lifted({0, 0.05, 0})[2], -height, 2e-4);                  // far: hover height
+  EXPECT_NEAR(lifted({0.003, -0.002, 0.001})[0], 0.003, 1e-12);         // x, y unchanged
+  // A tip level with the key top but 8 mm beside it is further from its target than one
+  // hovering at hover_height over that spot: it must come up before it goes over.
+  EXPECT_GT(lifted({0.008, 0, 0}).norm(), 1.5 * lifted({0.008, 0, height}).norm());  // 14.4 against 8.5 mm
+  // Jacobian against central differences along each column of a raw Jacobian.
+  const Eigen::Vector3d r0(0.003, -0.005, 0.004);
+  Eigen::MatrixXd raw = Eigen::MatrixXd::Zero(3, m->nv);
+  for (int j = 0; j < m->nv; ++j)
+    for (int i = 0; i < 3; ++i) raw(i, j) = std::sin(1.0 + 3 * j + i);
+  buf.dim = 3;
+  buf.uses_q = true;
+  buf.r.head<3>() = r0;
+  buf.jq.topRows(3) = raw;
+  adroit_mpc::approachFromAbove(height, radius, buf);
+  const Eigen::MatrixXd jq = buf.jq.topRows(3);
+  const double h = 1e-7;
+  for (int j = 0; j < m->nv; ++j) {
+    const Eigen::Vector3d fd = (lifted(r0 + h * raw.col(j)) - lifted(r0 - h * raw.col(j))) / (2 * h);
+    EXPECT_NEAR((fd - jq.col(j)).norm(), 0.0, 1e-6 * (1 + fd.norm())) << "column " << j;
+  }
+  // Radius 0: the old straight approach.
+  buf.uses_q = false;
+  buf.r.head<3>() = Eigen::Vector3d(0.008, 0, 0);
+  adroit_mpc::approachFromAbove(height, 0.0, buf);
+  EXPECT_EQ(buf.r[2], 0.0);
+}
+
 TEST_F(Typing, RepeatedKeyMustComeUpFirst) {
   std::string why;
   ASSERT_TRUE(task->setSequence("11", &why));

@@ -2,7 +2,8 @@
 // from the layout: each key column goes to a different fingertip, the assignment with the
 // least summed horizontal fingertip-to-key distance at a keyframe; YAML overrides per key).
 // Costs, with the smooth steps S_up / S_dn = 1 - S_up as coefficients (smooth_step.h):
-//   S_up x (current key pressed towards full travel + its finger's tip to the key top)
+//   S_up x (current key pressed towards full travel + its finger's tip to the key top, from
+//     above: approachFromAbove)
 //   S_dn x (next key pressed + the next finger's tip to its key top)
 //   S_up x next key hover (the next finger above its key, when it is another finger)
 //   + home hover: every other finger with keys above its home key (its key nearest to it at
@@ -28,6 +29,12 @@
 #include <vector>
 
 namespace adroit_mpc {
+
+// The residual r = tip - key top of pointResidual (buf, with its Jacobian), made to approach
+// from above: r_z -= height * rho^2 / (rho^2 + radius^2), rho = |r_xy|, so the target is the key
+// top when the tip is over it and rises to `height` above it as the tip strays sideways
+// (half of it at rho = radius). radius or height 0: unchanged.
+void approachFromAbove(double height, double radius, ResidualBuffer& buf);
 
 class TypeTask : public Task {
  public:
@@ -100,7 +107,7 @@ class TypeTask : public Task {
   WeightTable weights_;
   int w_press_, w_approach_, w_hover_, w_other_keys_, w_posture_, w_control_, w_synergy_;
   double terminal_scale_, hover_height_, approach_smoothing_, key_period_, min_lead_, step_smoothness_;
-  double release_depth_;
+  double release_depth_, approach_radius_;
   double horizon_hint_, planner_dt_hint_;
   std::string assignment_keyframe_;
   std::vector<std::pair<std::string, int>> assignment_overrides_;  // label -> finger

@@ -3,7 +3,7 @@
 // against predictive sampling, synergies on / off, force against pneumatic mode, on identical
 // trials. A program, not a test.
 //
-//   mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,cem,cem_pneumatic,nosyn,pneumatic,pneumatic_open,as_planned,nocomp,coldfd]
+//   mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,cem,cem_pneumatic,nosyn,pneumatic,pneumatic_open,as_planned,nocomp,coldfd,fullfd,pneumatic_fullfd]
 //               [--out DIR] [--seed S] [--only-trial K] [--fixed-latency S] [--latency-sweep S,S,...]
 //               [--dt S] [--horizon S] [--skip K] [--sensed] [--feedback-scale F] [--contact M,S] [--events]
 //               [--idle S]
@@ -18,6 +18,10 @@
 // Variant coldfd is iLQG with every finite-difference nudge solved from the knot's warm start
 // (mjd_transitionFD's) instead of the nominal step's solution (PlannerSettings::fd_warmstart,
 // on by default): its baseline.
+// Variants fullfd and pneumatic_fullfd are iLQG (force, pneumatic mode) on the derivative path
+// before issue 38: every knot of the skip pattern evaluated at every optimise, one nudge per
+// control (PlannerSettings::derivative_max_age 0, fd_force_space off): the baselines of the
+// reused derivatives and of B through the generalised forces.
 // The table's "start" column says how far each plan's starting state was from the state when it
 // took over (joint RMS, median): the prediction's error, or without it the measured state's age.
 //
@@ -166,6 +170,7 @@ struct Variant {
   bool world_as_planned = false;  // the simulation runs the planning MJCF (diagnostic, see --variants)
   bool compensate = true;  // plan from the state predicted at the expected latency (latency_compensation.h)
   bool fd_warmstart = true;  // finite-difference nudges solved from the nominal's solution (fd_derivatives.h)
+  bool cheap_derivatives = true;  // reused across optimisations, B through the forces (fd_derivatives.h)
 };
 
 struct TrialSpec {
@@ -291,6 +296,7 @@ class TrialRunner {
                     paramNumber(task, defaults, "latency_compensation", 0, 1) > 0.5;
     settings_.synergies = variant.synergies;
     settings_.fd_warmstart = variant.fd_warmstart;
+    if (!variant.cheap_derivatives) settings_.derivative_max_age = 0, settings_.fd_force_space = false;
     PlanningModelSettings ms;
     ms.timestep = settings_.dt;
     if (task == "type") ms.contact_margin = 0.001, ms.contact_softness = 0.001;  // as the node
@@ -859,7 +865,9 @@ const std::map<std::string, Variant>& knownVariants() {
       {"pneumatic_open", {"pneumatic_open", "ilqg", true, true, true}},
       {"as_planned", {"as_planned", "ilqg", true, false, false, true}},
       {"nocomp", {"nocomp", "ilqg", true, false, false, false, false}},
-      {"coldfd", {"coldfd", "ilqg", true, false, false, false, true, false}}};
+      {"coldfd", {"coldfd", "ilqg", true, false, false, false, true, false}},
+      {"fullfd", {"fullfd", "ilqg", true, false, false, false, true, true, false}},
+      {"pneumatic_fullfd", {"pneumatic_fullfd", "ilqg", true, true, false, false, true, true, false}}};
   return known;
 }
 
@@ -900,7 +908,7 @@ struct Options {
 
 constexpr const char* kUsage =
     "usage: mpc_success [--trials N] [--tasks catch,relocate,type] "
-    "[--variants ilqg,sampling,cem,cem_pneumatic,nosyn,pneumatic,pneumatic_open,as_planned,nocomp,coldfd] [--out DIR] "
+    "[--variants ilqg,sampling,cem,cem_pneumatic,nosyn,pneumatic,pneumatic_open,as_planned,nocomp,coldfd,fullfd,pneumatic_fullfd] [--out DIR] "
     "[--seed S] [--only-trial K] [--fixed-latency S] [--latency-sweep S,S,...] [--dt S] [--horizon S] [--skip K] "
     "[--sensed] [--feedback-scale F] [--compensation on|off|task] [--contact M,S] [--events] [--idle S] "
     "[--set [task.]key=number]... [--pool ilqg_key=number]... [--object-mass KG] [--object-scale S] "
@@ -936,7 +944,7 @@ void checkOptions(Options& o, adroit::CommandLine& args, const std::string& task
   for (const auto& v : split(variants)) {
     if (!knownVariants().count(v))
       args.fail("unknown variant '" + v + "' (known: ilqg, sampling, cem, cem_pneumatic, nosyn, pneumatic, "
-                "pneumatic_open, as_planned, nocomp, coldfd)");
+                "pneumatic_open, as_planned, nocomp, coldfd, fullfd, pneumatic_fullfd)");
     o.variants.push_back(knownVariants().at(v));
   }
   o.tasks = split(tasks);

@@ -2,6 +2,7 @@
 // (thesis 6.4.3). A program, not a test: run it on an idle machine.
 //
 //   mpc_timing [--iterations N] [--dt S] [--skip K] [--quick] [--compare-only]
+//              [--paths-only] [--blocks N] [--max-age S] [--reuse-tolerance X]
 //              [--planners ilqg,sampling,cem] [--tasks catch,relocate,type]
 //              [--samples N] [--cem-elites N] [--cem-std-initial S] [--cem-std-min S]
 //
@@ -10,6 +11,10 @@
 // 2. iLQG (and predictive sampling in the same run) in closed loop on the bottle drop:
 //    the simulation (bottle.xml, 2 ms) runs the policy for one control period between two
 //    optimisations; per-phase time split, median and p90.
+// 2a. The derivative path before issue 38 (every knot of the skip pattern at every call, one
+//    nudge per control) against the shipped one (derivatives reused across calls up to
+//    --max-age, B through the generalised forces), alternating blocks of the closed loop;
+//    CPU seconds per iteration of each and their ratio (--paths-only: this table alone).
 // 2b. The planners side by side on every task (its scene and its YAML's planner hints):
 //    wall and CPU time per iteration, CPU against iLQG's (--compare-only: this table alone).
 //    --samples and the --cem-* flags set the sampling planners' settings for it.
@@ -57,9 +62,10 @@ double processCpuSeconds() {
 }
 
 struct Series {
-  std::vector<double> rollout, derivatives, cost, backward, line_search, total, cpu;
+  std::vector<double> rollout, derivatives, cost, backward, line_search, total, cpu, knots;
   void add(const OptimizeReport& r, double cpu_seconds) {
     cpu.push_back(cpu_seconds);
+    knots.push_back(r.derivative_knots);
     rollout.push_back(r.rollout);
     derivatives.push_back(r.derivatives);
     cost.push_back(r.cost);
@@ -70,6 +76,14 @@ struct Series {
 };
 
 double ms(const std::vector<double>& v, double p) { return 1e3 * adroit::percentile(v, p); }
+
+double mean(const std::vector<double>& v) {
+  double sum = 0;
+  for (double x : v) sum += x;
+  return v.empty() ? 0 : sum / v.size();
+}
+
+void append(std::vector<double>& to, const std::vector<double>& from) { to.insert(to.end(), from.begin(), from.end()); }
 
 struct RunResult {
   Series series;
@@ -301,26 +315,83 @@ std::map<std::string, double> comparePlanners(const std::string& share, const Co
   return medians;
 }
 
+void printCpuRatio(double before, double shipped) {
+  const double ratio = shipped / before;
+  std::printf("RESULT adroit_mpc/ilqg_cpu_per_iteration_ratio %.2f ratio target <= 0.5 %s\n", ratio,
+              ratio <= 0.5 ? "PASS" : "FAIL");
+}
+
+// 2a. The derivative path before issue 38 (every knot of the skip pattern at every call, one
+// nudge per control) against the shipped one (derivatives reused across calls, B through the
+// generalised forces), on the same closed loop in alternating blocks (ABBA: the order swaps
+// every block), so that a change of the machine's load falls on both. Returns the median CPU
+// time per iteration of each, ms.
+std::pair<double, double> compareDerivativePaths(const TaskSetup& setup, const PlannerSettings& shipped,
+                                                 int iterations, int blocks, double period) {
+  PlannerSettings before = shipped;
+  before.derivative_max_age = 0;
+  before.fd_force_space = false;
+  std::array<Series, 2> series;  // before, shipped
+  std::array<std::vector<double>, 2> errors;
+  std::array<int, 2> diverged{0, 0};
+  for (int b = 0; b < blocks; ++b) {
+    for (int k = 0; k < 2; ++k) {
+      const int path = b % 2 == 0 ? k : 1 - k;
+      const RunResult r = runClosedLoop(setup, "ilqg", path ? shipped : before, true, iterations, period);
+      Series& s = series[path];
+      append(s.rollout, r.series.rollout);
+      append(s.derivatives, r.series.derivatives);
+      append(s.cost, r.series.cost);
+      append(s.backward, r.series.backward);
+      append(s.line_search, r.series.line_search);
+      append(s.total, r.series.total);
+      append(s.cpu, r.series.cpu);
+      append(s.knots, r.series.knots);
+      errors[path].push_back(r.final_error);
+      diverged[path] += r.diverged;
+    }
+  }
+  std::printf("\niLQG derivative paths, paired (%s, %d blocks x %d iterations each, alternating ABBA; derivative "
+              "max age %.3g s, reuse tolerance %.3g, B through the generalised forces %s)\n",
+              setup.task.c_str(), blocks, iterations, shipped.derivative_max_age, shipped.derivative_reuse_tolerance,
+              shipped.fd_force_space ? "on" : "off");
+  std::printf("%-34s %10s %10s %10s %10s %12s %10s %9s %10s\n", "path", "wall med.", "wall p90", "CPU med.", "CPU p90",
+              "deriv. med.", "FD knots", "diverged", "final err");
+  const char* names[2] = {"before (every knot, per control)", "shipped (reuse, force space)"};
+  for (int path = 0; path < 2; ++path) {
+    const Series& s = series[path];
+    std::printf("%-34s %10.2f %10.2f %10.2f %10.2f %12.2f %10.2f %9d %10.4f\n", names[path], ms(s.total, 50),
+                ms(s.total, 90), ms(s.cpu, 50), ms(s.cpu, 90), ms(s.derivatives, 50), mean(s.knots), diverged[path],
+                mean(errors[path]));
+  }
+  return {ms(series[0].cpu, 50), ms(series[1].cpu, 50)};
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  int iterations = 50;
-  bool quick = false, compare_only = false;
+  int iterations = 50, blocks = 4;
+  bool quick = false, compare_only = false, paths_only = false;
   // Defaults as shipped: the catch task's planner_dt (config/tasks/catch.yaml) and
   // derivative_skip of config/mpc.yaml.
   double dt = paramNumber("catch", defaultTaskParams("catch"), "planner_dt", 1e-4, 0.1);
   int skip = PlannerSettings().derivative_skip;
+  double max_age = PlannerSettings().derivative_max_age, reuse_tolerance = PlannerSettings().derivative_reuse_tolerance;
   Comparison comparison;
   adroit::CommandLine args(argc, argv,
                            "usage: mpc_timing [--iterations N] [--dt S] [--skip K] [--quick] [--compare-only] "
-                           "[--planners ilqg,sampling,cem] [--tasks catch,relocate,type] [--samples N] "
-                           "[--cem-elites N] [--cem-std-initial S] [--cem-std-min S]");
+                           "[--paths-only] [--blocks N] [--max-age S] [--reuse-tolerance X] [--planners ilqg,sampling,cem] "
+                           "[--tasks catch,relocate,type] [--samples N] [--cem-elites N] [--cem-std-initial S] [--cem-std-min S]");
   while (args.next()) {
     if (args.is("--iterations")) iterations = static_cast<int>(args.integer());
     else if (args.is("--dt")) dt = args.number();
     else if (args.is("--skip")) skip = static_cast<int>(args.integer());
     else if (args.is("--quick")) quick = true;
     else if (args.is("--compare-only")) compare_only = true;
+    else if (args.is("--paths-only")) paths_only = true;
+    else if (args.is("--blocks")) blocks = static_cast<int>(args.integer());
+    else if (args.is("--max-age")) max_age = args.number();
+    else if (args.is("--reuse-tolerance")) reuse_tolerance = args.number();
     else if (args.is("--planners")) comparison.planners = commaList(args.text());
     else if (args.is("--tasks")) comparison.tasks = commaList(args.text());
     else if (args.is("--samples")) comparison.base.samples = static_cast<int>(args.integer());
@@ -329,6 +400,7 @@ int main(int argc, char** argv) {
     else if (args.is("--cem-std-min")) comparison.base.cem_std_min = args.number();
     else args.unknown();
   }
+  if (blocks < 1) args.fail("--blocks must be at least 1");
   comparison.iterations = iterations;
   try {
     if (compare_only) {
@@ -337,6 +409,27 @@ int main(int argc, char** argv) {
       std::printf("MPC planners per task, %u cores, load average %.1f\n",
                   std::max(1u, std::thread::hardware_concurrency()), load[0]);
       comparePlanners(descriptionShareDir(), comparison, 0.02);
+      return 0;
+    }
+    // The shipped settings on the catch (config/mpc.yaml, config/tasks/catch.yaml).
+    PlannerSettings chosen;
+    chosen.horizon = 0.3;
+    chosen.dt = dt;
+    chosen.threads = 0;
+    chosen.synergies = true;
+    chosen.derivative_skip = skip;
+    chosen.derivative_max_age = max_age;
+    chosen.derivative_reuse_tolerance = reuse_tolerance;
+    chosen.samples = 16;
+    const double period = 0.02;
+    if (paths_only) {
+      double load[1] = {0};
+      if (getloadavg(load, 1) < 1) load[0] = -1;
+      std::printf("MPC derivative paths, catch, %u cores, load average %.1f\n",
+                  std::max(1u, std::thread::hardware_concurrency()), load[0]);
+      const auto [before, shipped] =
+          compareDerivativePaths(taskSetup(descriptionShareDir(), "catch"), chosen, iterations, blocks, period);
+      printCpuRatio(before, shipped);
       return 0;
     }
     Scene scene;
@@ -496,14 +589,6 @@ int main(int argc, char** argv) {
     }
 
     // 2. Closed loop, chosen defaults (config/mpc.yaml).
-    PlannerSettings chosen;
-    chosen.horizon = 0.3;
-    chosen.dt = dt;
-    chosen.threads = 0;
-    chosen.synergies = true;
-    chosen.derivative_skip = skip;
-    chosen.samples = 16;
-    const double period = 0.02;
     std::printf("\niLQG closed loop (%d iterations, control period %.0f ms, dt %.3f, skip %d, synergies)\n",
                 iterations, 1e3 * period, chosen.dt, chosen.derivative_skip);
     RunResult ilqg = runClosedLoop(catch_setup, "ilqg", chosen, true, iterations, period);
@@ -517,11 +602,15 @@ int main(int argc, char** argv) {
     std::printf("%-22s %10.2f %10.2f   %s\n", "line search", ms(s.line_search, 50), ms(s.line_search, 90), "7");
     std::printf("%-22s %10.2f %10.2f   %s\n", "total iLQG", ms(s.total, 50), ms(s.total, 90), "59");
     std::printf("%-22s %10.2f %10.2f   (CPU time of all threads)\n", "CPU iLQG", ms(s.cpu, 50), ms(s.cpu, 90));
+    std::printf("%-22s %10.2f %10s   (mean; the rest held or reused)\n", "FD knots evaluated", mean(s.knots), "");
     std::printf("%-22s %10.2f %10.2f   (%d samples)\n", "total pred. sampling", ms(sampling.series.total, 50),
                 ms(sampling.series.total, 90), chosen.samples);
     std::printf("%-22s %10.2f %10.2f\n", "CPU pred. sampling", ms(sampling.series.cpu, 50), ms(sampling.series.cpu, 90));
     std::printf("diverged iterations: iLQG %d, sampling %d; object distance to goal at the end: iLQG %.3f m, "
                 "sampling %.3f m\n", ilqg.diverged, sampling.diverged, ilqg.final_error, sampling.final_error);
+
+    // 2a. The derivative path before and after issue 38, paired.
+    const auto [cpu_before, cpu_shipped] = compareDerivativePaths(catch_setup, chosen, iterations, blocks, period);
 
     // 2b. The planners side by side on every task.
     const std::map<std::string, double> per_task = comparePlanners(scene.share, comparison, period);
@@ -571,6 +660,7 @@ int main(int argc, char** argv) {
     }
     std::printf("RESULT adroit_mpc/active_contacts_pruned_ratio %.2f ratio target <= 0.7 %s\n",
                 mean_pruned / mean_unpruned, mean_pruned / mean_unpruned <= 0.7 ? "PASS" : "FAIL");
+    printCpuRatio(cpu_before, cpu_shipped);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "mpc_timing: %s\n", e.what());
     return 1;

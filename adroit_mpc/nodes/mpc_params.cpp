@@ -71,7 +71,8 @@ MpcParams readParams(const ros::NodeHandle& pnh) {
                                  "cem_elites", "cem_std_initial", "cem_std_min",
                                  "control_rate", "state_timeout", "feedback_scale", "marker_rate",
                                  "diagnostics_period", "nice", "control_priority", "lockstep", "physics_timestep", "lockstep_controls_per_plan",
-                                 "min_tension", "latency_compensation", "fd_warmstart"};
+                                 "min_tension", "latency_compensation", "fd_warmstart", "fd_force_space",
+                                 "derivative_max_age", "derivative_reuse_tolerance"};
   // dynamic_reconfigure keeps its values (task weights) among the private parameters too.
   for (const auto& d : adroit_mpc::MpcConfig::__getParamDescriptions__()) keys.insert(d->name);
   p.checkKeys("", keys);
@@ -109,6 +110,9 @@ MpcParams readParams(const ros::NodeHandle& pnh) {
   s.synergies = p.boolean("synergies", s.synergies);
   s.derivative_skip = p.integer("derivative_skip", static_cast<int>(hint("derivative_skip", s.derivative_skip)), 1, 100);
   s.fd_warmstart = p.boolean("fd_warmstart", s.fd_warmstart);
+  s.fd_force_space = p.boolean("fd_force_space", s.fd_force_space);
+  s.derivative_max_age = p.number("derivative_max_age", s.derivative_max_age, 0.0, 10.0);
+  s.derivative_reuse_tolerance = p.number("derivative_reuse_tolerance", s.derivative_reuse_tolerance, 1e-9, 1e3);
   s.samples = p.integer("samples", s.samples, 1, 4096);
   s.noise_scale = p.number("noise_scale", s.noise_scale, 0.0, 10.0);
   s.cem_elites = p.integer("cem_elites", s.cem_elites, 1, s.samples);

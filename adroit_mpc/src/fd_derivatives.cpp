@@ -3,6 +3,7 @@
 #include "adroit_mpc/planner.h"  // integrateAfterForward
 
 #include <algorithm>
+#include <cmath>
 #include <numeric>
 #include <stdexcept>
 #include <string>
@@ -72,6 +73,10 @@ void FdDerivatives::initialize(const mjModel* m, int horizon, int workers, const
   if (horizon < 1) throw std::invalid_argument("fd derivatives: horizon must be >= 1 knot");
   if (workers < 1) throw std::invalid_argument("fd derivatives: need at least one worker");
   if (m->opt.integrator == mjINT_RK4) throw std::invalid_argument("fd derivatives: the RK4 integrator is not supported");
+  if (!(settings.max_age >= 0) || !std::isfinite(settings.max_age))
+    throw std::invalid_argument("fd derivatives: max_age must be >= 0 and finite, got " + std::to_string(settings.max_age));
+  if (!(settings.reuse_tolerance > 0) || !std::isfinite(settings.reuse_tolerance))
+    throw std::invalid_argument("fd derivatives: reuse_tolerance must be positive and finite");
   model_ = m;
   settings_ = settings;
   horizon_ = horizon;
@@ -124,6 +129,11 @@ void FdDerivatives::initialize(const mjModel* m, int horizon, int workers, const
     std::sort(pair_of_geoms_.begin(), pair_of_geoms_.end());
   }
 
+  linear_actuator_.assign(m->nu, 0);
+  for (int a = 0; a < m->nu; ++a)
+    linear_actuator_[a] = m->actuator_dyntype[a] == mjDYN_NONE && m->actuator_gaintype[a] == mjGAIN_FIXED &&
+                          (m->actuator_biastype[a] == mjBIAS_NONE || m->actuator_biastype[a] == mjBIAS_AFFINE);
+
   data_.clear();
   scratch_.clear();
   scratch_.resize(workers);
@@ -149,7 +159,31 @@ void FdDerivatives::initialize(const mjModel* m, int horizon, int workers, const
       s.active_pairs.reserve(m->npair);
       s.nudge_model = adroit::copyModel(m);
     }
+    s.forced_dofs.reserve(m->nv);
+    s.force_columns = Eigen::MatrixXd::Zero(nx_, m->nv);
   }
+
+  const std::size_t n = computed_.size();
+  for (auto* kept : {&kept_, &next_}) {
+    kept->assign(n, Linearisation{});
+    for (Linearisation& k : *kept) {
+      k.state = Eigen::VectorXd::Zero(n_state);
+      k.A = Eigen::MatrixXd::Zero(nx_, nx_);
+      k.B = Eigen::MatrixXd::Zero(nx_, m->nu);
+    }
+  }
+  source_.assign(n, -1);
+  evaluate_.clear();
+  evaluate_.reserve(n);
+  forget();
+  dq_ = Eigen::VectorXd::Zero(m->nv);
+  x_at_ = Eigen::VectorXd::Zero(n_state);
+}
+
+void FdDerivatives::forget() {
+  for (Linearisation& k : kept_) k.valid = false;
+  kept_t0_valid_ = false;
+  refreshes_due_ = 0;
 }
 
 void FdDerivatives::save(const mjData* d, Scratch& s) const {
@@ -259,21 +293,10 @@ int FdDerivatives::knot(mjData* d, std::size_t worker, Eigen::MatrixXd& A, Eigen
   }
   restore(d, s);
 
-  // Controls (skip the position and velocity stages); a control at its range's end is
-  // nudged inwards (mj_step clamps ctrl, so outwards would read zero).
-  for (int i = 0; i < m->nu; ++i) {
-    const bool limited = m->actuator_ctrllimited[i];
-    const double lo = m->actuator_ctrlrange[2 * i], hi = m->actuator_ctrlrange[2 * i + 1];
-    const bool forward = !limited || s.ctrl[i] + eps <= hi;
-    const bool backward = (centered || !forward) && (!limited || s.ctrl[i] - eps >= lo);
-    if (forward) nudgedStep(d, s, d->ctrl + i, eps, mjSTAGE_VEL, s.plus);
-    if (backward) nudgedStep(d, s, d->ctrl + i, -eps, mjSTAGE_VEL, s.minus);
-    if (forward && backward) difference(s.minus, s.plus, 2 * eps, s);
-    else if (forward) difference(s.next, s.plus, eps, s);
-    else if (backward) difference(s.minus, s.next, eps, s);
-    else std::fill(s.delta.begin(), s.delta.end(), 0.0);
-    for (int r = 0; r < nx_; ++r) B(r, i) = s.delta[r];
-  }
+  // Controls first, while d holds the nominal step's actuator moments and lengths.
+  const bool through_forces = settings_.force_space_controls;
+  controlColumns(d, s, !through_forces, B);
+  if (through_forces) forceSpaceColumns(d, s, B);
   // Activations (skip the position and velocity stages), one column each.
   for (int i = 0; i < na; ++i) {
     nudgedStep(d, s, d->act + i, eps, mjSTAGE_VEL, s.plus);
@@ -315,17 +338,105 @@ int FdDerivatives::knot(mjData* d, std::size_t worker, Eigen::MatrixXd& A, Eigen
   return columns;
 }
 
+void FdDerivatives::controlColumns(mjData* d, Scratch& s, bool linear_too, Eigen::MatrixXd& B) const {
+  const mjModel* m = model_;
+  const double eps = settings_.epsilon;
+  const bool centered = settings_.centered;
+  // Controls (skip the position and velocity stages); a control at its range's end is
+  // nudged inwards (mj_step clamps ctrl, so outwards would read zero).
+  for (int i = 0; i < m->nu; ++i) {
+    if (linear_actuator_[i] && !linear_too) continue;
+    const bool limited = m->actuator_ctrllimited[i];
+    const double lo = m->actuator_ctrlrange[2 * i], hi = m->actuator_ctrlrange[2 * i + 1];
+    const bool forward = !limited || s.ctrl[i] + eps <= hi;
+    const bool backward = (centered || !forward) && (!limited || s.ctrl[i] - eps >= lo);
+    if (forward) nudgedStep(d, s, d->ctrl + i, eps, mjSTAGE_VEL, s.plus);
+    if (backward) nudgedStep(d, s, d->ctrl + i, -eps, mjSTAGE_VEL, s.minus);
+    if (forward && backward) difference(s.minus, s.plus, 2 * eps, s);
+    else if (forward) difference(s.next, s.plus, eps, s);
+    else if (backward) difference(s.minus, s.next, eps, s);
+    else std::fill(s.delta.begin(), s.delta.end(), 0.0);
+    for (int r = 0; r < nx_; ++r) B(r, i) = s.delta[r];
+  }
+}
+
+double FdDerivatives::forceGain(const mjData* d, const Scratch& s, int a) const {
+  const mjModel* m = model_;
+  const double ctrl = s.ctrl[a];
+  // A control outside its range is clamped by the step: it moves nothing (the per-control
+  // nudge reads zero too). At the range's end it is free (nudged inwards).
+  if (m->actuator_ctrllimited[a] && !mjDISABLED(mjDSBL_CLAMPCTRL) &&
+      (ctrl < m->actuator_ctrlrange[2 * a] || ctrl > m->actuator_ctrlrange[2 * a + 1]))
+    return 0;
+  const double gain = m->actuator_gainprm[a * mjNGAIN];
+  if (m->actuator_forcelimited[a]) {
+    const double* bias = m->actuator_biasprm + a * mjNBIAS;
+    const double force = gain * ctrl + (m->actuator_biastype[a] == mjBIAS_AFFINE
+                                            ? bias[0] + bias[1] * d->actuator_length[a] + bias[2] * d->actuator_velocity[a]
+                                            : 0.0);
+    if (force < m->actuator_forcerange[2 * a] || force > m->actuator_forcerange[2 * a + 1]) return 0;
+  }
+  return gain;
+}
+
+void FdDerivatives::forceSpaceColumns(mjData* d, Scratch& s, Eigen::MatrixXd& B) const {
+  const mjModel* m = model_;
+  const int nv = m->nv;
+  const double eps = settings_.epsilon;
+  const bool centered = settings_.centered;
+  // The DOFs the linear actuators move at this knot (their moments: the nominal step's).
+  s.forced_dofs.clear();
+  for (int j = 0; j < nv; ++j)
+    for (int a = 0; a < m->nu; ++a)
+      if (linear_actuator_[a] && d->actuator_moment[a * nv + j] != 0) {
+        s.forced_dofs.push_back(j);
+        break;
+      }
+  // d x' / d qfrc_j: a generalised force enters at the acceleration stage, as ctrl does.
+  const int forced = static_cast<int>(s.forced_dofs.size());
+  for (int k = 0; k < forced; ++k) {
+    mjtNum& applied = d->qfrc_applied[s.forced_dofs[k]];
+    const mjtNum saved = applied;
+    for (const int sign : {1, -1}) {
+      if (sign < 0 && !centered) break;
+      applied = saved + sign * eps;
+      stepSkip(m, d, mjSTAGE_VEL, sign > 0 ? s.plus : s.minus);
+      restore(d, s);
+      applied = saved;
+    }
+    difference(centered ? s.minus : s.next, s.plus, centered ? 2 * eps : eps, s);
+    for (int r = 0; r < nx_; ++r) s.force_columns(r, k) = s.delta[r];
+  }
+  // Chain rule: d qfrc / d ctrl_a = moment_a' gain_a.
+  for (int a = 0; a < m->nu; ++a) {
+    if (!linear_actuator_[a]) continue;
+    B.col(a).setZero();
+    const double gain = forceGain(d, s, a);
+    if (gain == 0) continue;
+    for (int k = 0; k < forced; ++k) {
+      const double arm = d->actuator_moment[a * nv + s.forced_dofs[k]];
+      if (arm != 0) B.col(a) += (gain * arm) * s.force_columns.col(k);
+    }
+  }
+}
+
 void FdDerivatives::compute(adroit::ThreadPool& pool, const std::vector<Eigen::VectorXd>& states,
                             const std::vector<Eigen::VectorXd>& ctrl, const std::vector<double>& times,
                             std::vector<Eigen::MatrixXd>& A, std::vector<Eigen::MatrixXd>& B) {
   const mjModel* m = model_;
-  pool.parallelForWorkers(computed_.size(), [&](std::size_t i, std::size_t w) {
-    const int t = computed_[i];
+  planReuse(states, times);
+  pool.parallelForWorkers(evaluate_.size(), [&](std::size_t i, std::size_t w) {
+    const int t = computed_[evaluate_[i]];
     mjData* d = data_[w].get();
     setKnotState(m, d, states[t], ctrl[t], times[t]);
     const int columns = knot(d, w, A[t], B[t]);
-    if (i == 0) last_state_columns_ = columns;
+    if (t == 0) last_state_columns_ = columns;
   });
+  for (std::size_t i = 0; i < computed_.size(); ++i) {
+    if (source_[i] < 0) continue;
+    A[computed_[i]] = kept_[source_[i]].A;
+    B[computed_[i]] = kept_[source_[i]].B;
+  }
   // Hold each computed linearisation over the skipped knots after it.
   for (std::size_t i = 0; i < computed_.size(); ++i) {
     const int from = computed_[i];
@@ -335,6 +446,101 @@ void FdDerivatives::compute(adroit::ThreadPool& pool, const std::vector<Eigen::V
       B[t] = B[from];
     }
   }
+  if (settings_.max_age > 0) keep(states, times, A, B);
+}
+
+void FdDerivatives::planReuse(const std::vector<Eigen::VectorXd>& states, const std::vector<double>& times) {
+  const int n = static_cast<int>(computed_.size());
+  const double max_age = settings_.max_age;
+  const double t0 = times[0];
+  for (int i = 0; i < n; ++i) source_[i] = max_age > 0 ? nearestKept(states, times, times[computed_[i]], t0) : -1;
+  // Refreshes due: n knots every max_age of plan time, n since / max_age for the time since
+  // the last call, the fraction carried to the next call. Knots evaluated anyway count; the
+  // oldest kept ones (the earliest knot on a tie) make up the rest, so that the refreshes spread
+  // evenly over the calls instead of every linearisation expiring in the same one.
+  int evaluated = static_cast<int>(std::count(source_.begin(), source_.end(), -1));
+  if (max_age > 0) {
+    const double since = kept_t0_valid_ ? std::clamp(t0 - kept_t0_, 0.0, max_age) : max_age;
+    refreshes_due_ += n * since / max_age;
+    const int minimum = std::min(n, static_cast<int>(std::floor(refreshes_due_ + 1e-9)));
+    for (; evaluated < minimum; ++evaluated) {
+      int oldest = -1;
+      for (int i = 0; i < n; ++i)
+        if (source_[i] >= 0 && (oldest < 0 || kept_[source_[i]].computed_at < kept_[source_[oldest]].computed_at))
+          oldest = i;
+      source_[oldest] = -1;
+    }
+    refreshes_due_ = std::max(0.0, refreshes_due_ - evaluated);
+    kept_t0_ = t0;
+    kept_t0_valid_ = true;
+  }
+  evaluate_.clear();
+  last_oldest_age_ = 0;
+  for (int i = 0; i < n; ++i) {
+    if (source_[i] < 0) evaluate_.push_back(i);
+    else last_oldest_age_ = std::max(last_oldest_age_, t0 - kept_[source_[i]].computed_at);
+  }
+}
+
+int FdDerivatives::nearestKept(const std::vector<Eigen::VectorXd>& states, const std::vector<double>& times,
+                               double time, double t0) {
+  // No farther in time than the hold reaches (skip - 1 knots; half a knot without a skip).
+  const double window = std::max(settings_.skip - 1.0, 0.5) * model_->opt.timestep * (1 + 1e-9);
+  int best = -1;
+  for (int j = 0; j < static_cast<int>(kept_.size()); ++j) {
+    const Linearisation& k = kept_[j];
+    const double age = t0 - k.computed_at;
+    if (!k.valid || !(age >= 0 && age <= settings_.max_age * (1 + 1e-9)) || std::fabs(k.time - time) > window) continue;
+    if (best < 0 || std::fabs(k.time - time) < std::fabs(kept_[best].time - time)) best = j;
+  }
+  if (best < 0) return -1;
+  // Has the trajectory moved where that linearisation was taken? This call's states at its
+  // time against its state: the plan's change, not the motion over the offset in time (the
+  // hold's approximation, which the window bounds).
+  interpolate(states, times, kept_[best].time, x_at_);
+  if (stateDistance(x_at_, kept_[best].state) > settings_.reuse_tolerance) return -1;
+  return best;
+}
+
+void FdDerivatives::interpolate(const std::vector<Eigen::VectorXd>& states, const std::vector<double>& times,
+                                double time, Eigen::VectorXd& out) const {
+  // Linear between the knots (quaternions unnormalised: mj_differentiatePos takes them), held
+  // beyond the ends.
+  const int last = static_cast<int>(times.size()) - 1;
+  const double s = std::clamp((time - times[0]) / model_->opt.timestep, 0.0, static_cast<double>(last));
+  const int i = std::min(static_cast<int>(s), std::max(last - 1, 0));
+  const double a = s - i;
+  out = (1 - a) * states[i] + a * states[std::min(i + 1, last)];
+}
+
+double FdDerivatives::stateDistance(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
+  const mjModel* m = model_;
+  mj_differentiatePos(m, dq_.data(), 1.0, b.data(), a.data());
+  double distance = dq_.cwiseAbs().maxCoeff();
+  // A velocity difference dv moves the next knot by dt dv: compared in the same units.
+  for (int k = 0; k < m->nv; ++k)
+    distance = std::max(distance, m->opt.timestep * std::fabs(a[m->nq + k] - b[m->nq + k]));
+  for (int k = m->nq + m->nv; k < m->nq + m->nv + m->na; ++k) distance = std::max(distance, std::fabs(a[k] - b[k]));
+  return distance;
+}
+
+void FdDerivatives::keep(const std::vector<Eigen::VectorXd>& states, const std::vector<double>& times,
+                         const std::vector<Eigen::MatrixXd>& A, const std::vector<Eigen::MatrixXd>& B) {
+  for (std::size_t i = 0; i < computed_.size(); ++i) {
+    Linearisation& k = next_[i];
+    if (source_[i] >= 0) {  // the same linearisation, kept on
+      k = kept_[source_[i]];
+      continue;
+    }
+    const int t = computed_[i];
+    k.valid = true;
+    k.time = times[t];
+    k.computed_at = times[0];
+    k.state = states[t];
+    k.A = A[t];
+    k.B = B[t];
+  }
+  std::swap(kept_, next_);  // equal sizes: no allocation
 }
 
 }  // namespace adroit_mpc

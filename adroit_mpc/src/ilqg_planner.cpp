@@ -30,8 +30,15 @@ void IlqgPlanner::initialize(const mjModel* m, const Task& task, const PlannerSe
   state_.act.assign(m->na, 0.0);
   initial_.resize(m->nq + m->nv + m->na);
 
-  fd_.initialize(m, knots_, workers, FdSettings{settings.fd_epsilon, settings.fd_centered, settings.derivative_skip, true,
-                                                   settings.fd_warmstart});
+  FdSettings fd;
+  fd.epsilon = settings.fd_epsilon;
+  fd.centered = settings.fd_centered;
+  fd.skip = settings.derivative_skip;
+  fd.warmstart_from_nominal = settings.fd_warmstart;
+  fd.force_space_controls = settings.fd_force_space;
+  fd.max_age = settings.derivative_max_age;
+  fd.reuse_tolerance = settings.derivative_reuse_tolerance;
+  fd_.initialize(m, knots_, workers, fd);
   B_act_.assign(knots_, Eigen::MatrixXd::Zero(nx_, m->nu));
   lq_.resize(nx_, nu, knots_);
   backward_ = std::make_unique<adroit::BackwardPass>(nx_, nu, knots_);
@@ -59,6 +66,7 @@ void IlqgPlanner::setTask(const Task& task) { task_->copyParametersFrom(task); }
 
 void IlqgPlanner::reset() {
   have_previous_ = false;
+  fd_.forget();  // the safe warm start is another trajectory
   schedule_ = adroit::RegularizationSchedule{};
   schedule_.mu_min = settings_.mu_initial > 0 ? settings_.mu_initial : schedule_.mu_min;
   schedule_.mu = settings_.mu_initial;
@@ -220,6 +228,7 @@ OptimizeReport IlqgPlanner::optimize() {
     report.iterations = it + 1;
     adroit::Stopwatch clock;
     fd_.compute(*pool_, nominal_.states, nominal_.ctrl, nominal_.times, lq_.A, B_act_);
+    report.derivative_knots += fd_.lastEvaluatedKnots();
     for (int t = 0; t < knots_; ++t) space_.chainRule(B_act_[t], nominal_.controls[t], lq_.B[t]);
     report.derivatives += clock.elapsed();
 

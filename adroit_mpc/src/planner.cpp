@@ -71,6 +71,10 @@ int validatePlannerSettings(const mjModel* m, const PlannerSettings& s) {
   if (s.iterations < 1) bad("iterations must be >= 1");
   if (!(s.fd_epsilon > 0)) bad("fd_epsilon must be positive");
   if (s.derivative_skip < 1) bad("derivative_skip must be >= 1");
+  if (!(s.derivative_max_age >= 0) || !std::isfinite(s.derivative_max_age))
+    bad("derivative_max_age must be >= 0 s (0: no reuse) and finite, got " + std::to_string(s.derivative_max_age));
+  if (!(s.derivative_reuse_tolerance > 0) || !std::isfinite(s.derivative_reuse_tolerance))
+    bad("derivative_reuse_tolerance must be positive and finite, got " + std::to_string(s.derivative_reuse_tolerance));
   if (!(s.mu_initial >= 0)) bad("mu_initial must be >= 0");
   if (!(s.feedback_scale >= 0 && s.feedback_scale <= 1)) bad("feedback_scale must be in [0, 1]");
   if (s.samples < 1) bad("samples must be >= 1");

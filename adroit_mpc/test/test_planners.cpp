@@ -10,6 +10,8 @@
 
 #include <cmath>
 #include <limits>
+#include <string>
+#include <tuple>
 
 using namespace adroit_mpc;
 
@@ -270,6 +272,20 @@ TEST(Planners, BadSettingsAndNamesAreRejected) {
   s = smallSettings(0.5);
   s.synergies = true;  // a point mass has no fingers
   EXPECT_THROW(planner.initialize(m.get(), task, s), std::invalid_argument);
+  // The derivative reuse settings: one line naming the setting.
+  for (const auto& [age, tolerance, name] :
+       {std::tuple{-0.1, 0.01, "derivative_max_age"}, std::tuple{0.1, 0.0, "derivative_reuse_tolerance"},
+        std::tuple{0.1, std::numeric_limits<double>::infinity(), "derivative_reuse_tolerance"}}) {
+    s = smallSettings(0.5);
+    s.derivative_max_age = age;
+    s.derivative_reuse_tolerance = tolerance;
+    try {
+      planner.initialize(m.get(), task, s);
+      ADD_FAILURE() << "expected invalid_argument for " << name;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
+    }
+  }
   s = smallSettings(0.5);
   planner.initialize(m.get(), task, s);
   PlannerState wrong;

@@ -40,6 +40,16 @@ struct PlannerSettings {
   // FD nudges solved from the nominal's solution (FdSettings::warmstart_from_nominal): the
   // same derivatives to the solver's precision at 0.7x the derivative time (README).
   bool fd_warmstart = true;
+  // B through the generalised forces of the linear actuators (FdSettings::force_space_controls):
+  // one nudge per actuated DOF instead of one per control, the same B to FD precision.
+  bool fd_force_space = true;
+  // Reuse of derivatives across optimise() calls (FdSettings::max_age, reuse_tolerance): a
+  // knot takes a linearisation of an earlier call at about its time, computed at most
+  // derivative_max_age seconds of plan time ago, unless the trajectory there moved more than
+  // derivative_reuse_tolerance (m or rad; velocities as dt |dv|) from the state it was taken at.
+  // 0: every call computes every knot of the skip pattern (the path before).
+  double derivative_max_age = 0.1;
+  double derivative_reuse_tolerance = 0.5;
   double mu_initial = 1e-6;  // LM regularisation (small: MPC must take large steps, thesis 6.4)
   double feedback_scale = 1.0;
   // sampling planners (predictive sampling, cross entropy)
@@ -61,6 +71,7 @@ struct OptimizeReport {
   double cost_before = 0, cost_after = 0;
   double mu = 0, alpha = 0;
   int iterations = 0;
+  int derivative_knots = 0;  // knots whose derivatives were evaluated (the rest held or reused)
   bool improved = false;
   bool diverged = false;  // non-finite cost: the plan was reset to the safe warm start
 };

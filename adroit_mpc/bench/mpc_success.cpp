@@ -5,7 +5,7 @@
 //
 //   mpc_success [--trials N] [--tasks catch,relocate,type] [--variants ilqg,sampling,cem,cem_pneumatic,nosyn,pneumatic,pneumatic_open,as_planned,nocomp,coldfd,fullfd,pneumatic_fullfd]
 //               [--out DIR] [--seed S] [--only-trial K] [--fixed-latency S] [--latency-sweep S,S,...]
-//               [--dt S] [--horizon S] [--skip K] [--sensed] [--feedback-scale F] [--contact M,S] [--events]
+//               [--dt S] [--horizon S] [--skip K] [--tension-step-weight W] [--sensed] [--feedback-scale F] [--contact M,S] [--events]
 //               [--idle S]
 //               [--compensation on|off|task] [--set [task.]key=number]... [--pool ilqg_key=number]...
 //               [--object-mass KG] [--object-scale S] [--drop-height MIN,MAX] [--drop-offset M]
@@ -27,6 +27,10 @@
 //
 // --dt, --horizon, --skip override the task's planner_dt, horizon and derivative_skip hints
 // (defaults: config/tasks/<task>.yaml, else config/mpc.yaml's).
+// --tension-step-weight W: PlannerSettings::tension_step_weight (the cost of a tension step
+// from one knot to the next; 0: the plans before it). Pneumatic variants print each finger
+// group's largest reference step per knot and its 99th percentile ("max step", "p99 step") beside
+// the force tracking.
 // --contact M,S: the planning model's contact margin and softness [m] (defaults: planning_model.h;
 // typing 0.001, 0.001 as the node).
 // --sensed: the planner and the policy see the driver's sensed signals (sensor realism: noise,
@@ -646,6 +650,7 @@ class TrialRunner {
         if (!verdict.ok()) throw std::runtime_error("pool rejected the policy's reference: " + verdict.detail);
         preview_audit_->addReference(now, dt, static_cast<std::size_t>(samples),
                                      {reference_.begin(), reference_.begin() + samples * m->nu});
+        recordPlanSteps(samples, m->nu);
         recordForceTracking(sensed);
       }
     } else if (runner_->hasPolicy() && sent_.steps > 0) {  // the last plan's tensions, interpolated at now
@@ -793,6 +798,22 @@ class TrialRunner {
     row.insert(row.end(), floor.begin(), floor.end());
     force_trace_.push_back(std::move(row));
   }
+  // The reference's largest tension step from one knot to the next, per group of cylinders
+  // (what force_tracking_audit reports of the demo's plans).
+  // Also their 99th percentile: the largest is one event, the percentile the plans' habit.
+  void recordPlanSteps(int samples, int nu) {
+    for (int k = 1; k < samples; ++k)
+      for (int j = 0; j < nu; ++j) {
+        const double step = std::abs(reference_[k * nu + j] - reference_[(k - 1) * nu + j]);
+        double& largest = max_plan_step_[audited_[j].group];
+        largest = std::max(largest, step);
+        auto& histogram = plan_step_histogram_[audited_[j].group];
+        ++histogram[std::min(histogram.size() - 1, static_cast<std::size_t>(step / kStepBin))];
+      }
+  }
+  static constexpr double kStepBin = 0.1;  // N
+  std::map<std::string, double> max_plan_step_;  // N per knot, over every trial so far
+  std::map<std::string, std::array<long, 1000>> plan_step_histogram_;  // kStepBin bins
   std::vector<std::vector<double>> force_trace_;  // this trial: time, planned, sensed and per-tick floor tensions
   std::vector<double> reference_, force_;
   std::vector<double> pool_seconds_;  // wall time of each pool tick (all cylinders)
@@ -817,6 +838,18 @@ class TrialRunner {
     return preview_audit_ ? preview_audit_->groups() : std::map<std::string, std::vector<double>>{};
   }
   double auditDeadTime() const { return audit_dead_time_; }
+  // Pneumatic variants: per group, the policy references' largest tension step per knot [N].
+  const std::map<std::string, double>& maxPlanStep() const { return max_plan_step_; }
+  // ... and the 99th percentile of those steps [N] (upper edge of its 0.1 N bin; 0 if none).
+  double planStepPercentile99(const std::string& group) const {
+    const auto it = plan_step_histogram_.find(group);
+    if (it == plan_step_histogram_.end()) return 0;
+    long total = 0, seen = 0;
+    for (const long n : it->second) total += n;
+    for (std::size_t b = 0; b < it->second.size(); ++b)
+      if ((seen += it->second[b]) >= 0.99 * total) return (b + 1) * kStepBin;
+    return it->second.size() * kStepBin;
+  }
   static constexpr std::array<double, 3> kPreviewLeads = {0.005, 0.01, 0.02};  // s
 
  private:
@@ -910,7 +943,7 @@ constexpr const char* kUsage =
     "usage: mpc_success [--trials N] [--tasks catch,relocate,type] "
     "[--variants ilqg,sampling,cem,cem_pneumatic,nosyn,pneumatic,pneumatic_open,as_planned,nocomp,coldfd,fullfd,pneumatic_fullfd] [--out DIR] "
     "[--seed S] [--only-trial K] [--fixed-latency S] [--latency-sweep S,S,...] [--dt S] [--horizon S] [--skip K] "
-    "[--sensed] [--feedback-scale F] [--compensation on|off|task] [--contact M,S] [--events] [--idle S] "
+    "[--tension-step-weight W] [--sensed] [--feedback-scale F] [--compensation on|off|task] [--contact M,S] [--events] [--idle S] "
     "[--set [task.]key=number]... [--pool ilqg_key=number]... [--object-mass KG] [--object-scale S] "
     "[--drop-height MIN,MAX] [--drop-offset M] [--sensor-noise F] [--keys N] [--key-set DIGITS] "
     "[--sweep NAME=v1,v2,...]...";
@@ -937,6 +970,8 @@ void checkOptions(Options& o, adroit::CommandLine& args, const std::string& task
   if (o.trials < 1) args.fail("--trials must be at least 1");
   if (o.only_trial >= o.trials)
     args.fail("--only-trial " + std::to_string(o.only_trial) + " needs --trials > " + std::to_string(o.only_trial));
+  if (!(o.overrides.tension_step_weight >= 0) || !std::isfinite(o.overrides.tension_step_weight))
+    args.fail("--tension-step-weight must be >= 0 and finite");
   if (o.compensation != "task" && o.compensation != "on" && o.compensation != "off")
     args.fail("--compensation must be on, off or task (the task's hint)");
   if (o.feedback_scale != -1 && !(o.feedback_scale >= 0 && o.feedback_scale <= 1))
@@ -1003,6 +1038,7 @@ Options parseOptions(int argc, char** argv) {
     else if (args.is("--dt")) o.overrides.dt = args.number();
     else if (args.is("--horizon")) o.overrides.horizon = args.number();
     else if (args.is("--skip")) o.overrides.derivative_skip = static_cast<int>(args.integer());
+    else if (args.is("--tension-step-weight")) o.overrides.tension_step_weight = args.number();
     else if (args.is("--events")) o.print_events = true;
     else if (args.is("--idle")) o.idle = args.number();
     else if (args.is("--set")) sets.push_back(args.text());
@@ -1165,16 +1201,18 @@ void printPoolAudit(const TrialRunner& runner) {
               "%-9s %-14s exactly, and per tick: one command per %.0f ms pool tick, chosen with an exact model;\n"
               "%-9s %-14s preview: the reference given 5 / 10 / 20 ms earlier against the one given now\n",
               "", "", "", "", "", "", 1e3 * runner.auditDeadTime(), "", "", 1e3 * TrialRunner::poolPeriod(), "", "");
-  std::printf("%-9s %-14s   %-6s %6s %6s %8s %10s %8s %20s\n", "", "", "group", "RMSE", "floor", "per tick",
-              "RMSE/tick", "max ref", "preview 5/10/20 ms");
+  std::printf("%-9s %-14s   %-6s %6s %6s %8s %10s %8s %9s %9s %20s\n", "", "", "group", "RMSE", "floor", "per tick",
+              "RMSE/tick", "max ref", "max step", "p99 step", "preview 5/10/20 ms");
   const auto preview = runner.previewError();
   for (const auto& [group, f] : runner.forceTracking()) {
     char ahead[64] = "-";
     if (preview.count(group) && preview.at(group).size() == 3 && std::isfinite(preview.at(group)[0]))
       std::snprintf(ahead, sizeof ahead, "%.2f / %.2f / %.2f", preview.at(group)[0], preview.at(group)[1],
                     preview.at(group)[2]);
-    std::printf("%-9s %-14s   %-6s %6.2f %6.2f %8.2f %10.2f %8.1f %20s\n", "", "", group.c_str(), f.rmse, f.floor,
-                f.per_tick, f.per_tick > 0 ? f.rmse / f.per_tick : 0.0, f.max_reference, ahead);
+    const auto step = runner.maxPlanStep().find(group);
+    std::printf("%-9s %-14s   %-6s %6.2f %6.2f %8.2f %10.2f %8.1f %9.1f %9.1f %20s\n", "", "", group.c_str(), f.rmse,
+                f.floor, f.per_tick, f.per_tick > 0 ? f.rmse / f.per_tick : 0.0, f.max_reference,
+                step == runner.maxPlanStep().end() ? 0.0 : step->second, runner.planStepPercentile99(group), ahead);
   }
 }
 

@@ -72,7 +72,8 @@ MpcParams readParams(const ros::NodeHandle& pnh) {
                                  "control_rate", "state_timeout", "feedback_scale", "marker_rate",
                                  "diagnostics_period", "nice", "control_priority", "lockstep", "physics_timestep", "lockstep_controls_per_plan",
                                  "min_tension", "latency_compensation", "fd_warmstart", "fd_force_space",
-                                 "derivative_max_age", "derivative_reuse_tolerance"};
+                                 "derivative_max_age", "derivative_reuse_tolerance",
+                                 "tension_step_weight"};
   // dynamic_reconfigure keeps its values (task weights) among the private parameters too.
   for (const auto& d : adroit_mpc::MpcConfig::__getParamDescriptions__()) keys.insert(d->name);
   p.checkKeys("", keys);
@@ -118,6 +119,7 @@ MpcParams readParams(const ros::NodeHandle& pnh) {
   s.cem_elites = p.integer("cem_elites", s.cem_elites, 1, s.samples);
   s.cem_std_initial = p.number("cem_std_initial", s.cem_std_initial, 1e-4, 10.0);
   s.cem_std_min = p.number("cem_std_min", s.cem_std_min, 1e-4, s.cem_std_initial);
+  s.tension_step_weight = p.number("tension_step_weight", s.tension_step_weight, 0.0, 1e6);
   out.feedback_scale = p.number("feedback_scale", hint("feedback_scale", out.feedback_scale), 0.0, 1.0);
   s.feedback_scale = out.feedback_scale;
   out.latency_compensation = p.boolean("latency_compensation", hint("latency_compensation", 0.0) > 0.5);

@@ -11,7 +11,7 @@ void IlqgPlanner::initialize(const mjModel* m, const Task& task, const PlannerSe
   model_ = m;
   settings_ = settings;
   task_ = task.clone();
-  space_.initialize(m, settings.synergies);
+  space_.initialize(m, settings.synergies, settings.tension_step_weight);
   const int nu = space_.size();
   nx_ = 2 * m->nv + m->na;
   task_->bind(m, nu - m->nu);
@@ -135,7 +135,14 @@ void IlqgPlanner::warmStartRollout(OptimizeReport& report) {
   };
   rollout(m, space_, initial_, state_.time, law, knot_cost, w, nominal_);
   report.rollout += clock.elapsed() - cost_time;
-  report.cost += cost_time;
+  clock.restart();
+  addStepDerivatives();
+  report.cost += cost_time + clock.elapsed();
+}
+
+void IlqgPlanner::addStepDerivatives() {
+  if (space_.stepWeight() == 0) return;
+  for (int t = 0; t < knots_; ++t) space_.addStepDerivatives(nominal_, t, lq_.lu[t], lq_.luu[t]);
 }
 
 void IlqgPlanner::computeCostDerivatives() {
@@ -159,6 +166,7 @@ void IlqgPlanner::computeCostDerivatives() {
     lq_.lx[t] = c.lx;
     lq_.lxx[t] = c.lxx;
   });
+  addStepDerivatives();
 }
 
 bool IlqgPlanner::lineSearch(const adroit::BackwardPassResult& pass, OptimizeReport& report) {
@@ -214,6 +222,8 @@ OptimizeReport IlqgPlanner::optimize() {
   mju_copy(initial_.data(), state_.qpos.data(), m->nq);
   mju_copy(initial_.data() + m->nq, state_.qvel.data(), m->nv);
   if (m->na) mju_copy(initial_.data() + m->nq + m->nv, state_.act.data(), m->na);
+  if (have_previous_) space_.holdApplied(previous_, state_.time);
+  else space_.forgetApplied();
 
   warmStartRollout(report);
   report.cost_before = report.cost_after = nominal_.total;

@@ -84,6 +84,8 @@ int validatePlannerSettings(const mjModel* m, const PlannerSettings& s) {
     bad("cem_elites must be in [1, samples = " + std::to_string(s.samples) + "], got " + std::to_string(s.cem_elites));
   if (!(s.cem_std_initial > 0) || !std::isfinite(s.cem_std_initial))
     bad("cem_std_initial must be positive and finite, got " + std::to_string(s.cem_std_initial));
+  if (!(s.tension_step_weight >= 0) || !std::isfinite(s.tension_step_weight))
+    bad("tension_step_weight must be >= 0 and finite, got " + std::to_string(s.tension_step_weight));
   if (!(s.cem_std_min > 0) || !(s.cem_std_min <= s.cem_std_initial))
     bad("cem_std_min must be positive and <= cem_std_initial (" + std::to_string(s.cem_std_initial) + "), got " +
         std::to_string(s.cem_std_min));
@@ -103,7 +105,9 @@ void copyPlannerState(const mjModel* m, const PlannerState& in, PlannerState& ou
   std::copy(in.act.begin(), in.act.end(), out.act.begin());
 }
 
-void ControlSpace::initialize(const mjModel* m, bool synergies) {
+void ControlSpace::initialize(const mjModel* m, bool synergies, double step_weight) {
+  if (!(step_weight >= 0) || !std::isfinite(step_weight))
+    throw std::invalid_argument("planner: tension_step_weight must be >= 0 and finite, got " + std::to_string(step_weight));
   nu_ = m->nu;
   has_synergies_ = synergies;
   const int n = nu_ + (synergies ? Synergies::kCount : 0);
@@ -123,6 +127,17 @@ void ControlSpace::initialize(const mjModel* m, bool synergies) {
   }
   ctrl_.resize(nu_);
   mask_.resize(nu_);
+  step_weight_ = step_weight;
+  step_scale_.resize(nu_);
+  for (int i = 0; i < nu_; ++i) {
+    const double range = upper_[i] - lower_[i];
+    step_scale_[i] = range > 0 ? step_weight / (range * range) : 0.0;
+  }
+  applied_ = lower_.head(nu_);
+  has_applied_ = false;
+  step_gradient_.resize(nu_);
+  step_curvature_.resize(nu_);
+  scaled_map_.resize(nu_, synergies ? Synergies::kCount : 0);
 }
 
 void ControlSpace::toCtrl(const Eigen::VectorXd& u, double* ctrl) const {
@@ -157,6 +172,63 @@ void ControlSpace::chainGains(const Eigen::VectorXd& u, const Eigen::MatrixXd& K
 void ControlSpace::safeControls(Eigen::VectorXd& u) const {
   u.head(nu_) = lower_.head(nu_);
   if (has_synergies_) u.tail(Synergies::kCount).setZero();
+}
+
+void ControlSpace::holdApplied(const KnotTrajectory& plan, double time) {
+  const int T = static_cast<int>(plan.ctrl.size());
+  if (T == 0) {
+    has_applied_ = false;
+    return;
+  }
+  const double dt = T > 1 ? plan.times[1] - plan.times[0] : 1.0;
+  const double s = std::clamp((time - plan.times[0]) / dt, 0.0, static_cast<double>(T - 1));
+  const int i = std::min(static_cast<int>(s), T - 1);
+  const int j = std::min(i + 1, T - 1);
+  const double a = s - i;
+  applied_ = (1 - a) * plan.ctrl[i] + a * plan.ctrl[j];
+  has_applied_ = true;
+}
+
+double ControlSpace::stepCost(const KnotTrajectory& plan, int t) const {
+  if (step_weight_ == 0 || (t == 0 && !has_applied_)) return 0.0;
+  const Eigen::VectorXd& before = t > 0 ? plan.ctrl[t - 1] : applied_;
+  double sum = 0;
+  for (int i = 0; i < nu_; ++i) {
+    const double step = plan.ctrl[t][i] - before[i];
+    sum += step_scale_[i] * step * step;
+  }
+  return 0.5 * sum;
+}
+
+void ControlSpace::addStepDerivatives(const KnotTrajectory& plan, int t, Eigen::VectorXd& lu,
+                                      Eigen::MatrixXd& luu) const {
+  if (step_weight_ == 0) return;
+  const int T = static_cast<int>(plan.ctrl.size());
+  step_gradient_.setZero();
+  step_curvature_.setZero();
+  if (t > 0 || has_applied_) {  // this knot's own step
+    const Eigen::VectorXd& before = t > 0 ? plan.ctrl[t - 1] : applied_;
+    step_gradient_.array() += step_scale_.array() * (plan.ctrl[t] - before).array();
+    step_curvature_ += step_scale_;
+  }
+  if (t + 1 < T) {  // the next knot's step starts here
+    step_gradient_.array() -= step_scale_.array() * (plan.ctrl[t + 1] - plan.ctrl[t]).array();
+    step_curvature_ += step_scale_;
+  }
+  // d ctrl / d u = diag(mask) [I | S]: a control clamped at its range does not move.
+  if (has_synergies_) synergies_.apply(plan.controls[t].data(), ctrl_.data(), mask_.data());
+  else mask_.setOnes();
+  step_gradient_.array() *= mask_.array();
+  step_curvature_.array() *= mask_.array();  // mask is 0 or 1: mask^2 = mask
+  lu.head(nu_) += step_gradient_;
+  luu.topLeftCorner(nu_, nu_).diagonal() += step_curvature_;
+  if (!has_synergies_) return;
+  const Eigen::MatrixXd& S = synergies_.map();
+  lu.tail(Synergies::kCount).noalias() += S.transpose() * step_gradient_;
+  scaled_map_.noalias() = step_curvature_.asDiagonal() * S;
+  luu.topRightCorner(nu_, Synergies::kCount) += scaled_map_;
+  luu.bottomLeftCorner(Synergies::kCount, nu_) += scaled_map_.transpose();
+  luu.bottomRightCorner(Synergies::kCount, Synergies::kCount).noalias() += S.transpose() * scaled_map_;
 }
 
 void KnotTrajectory::resize(const mjModel* m, int knots, int controls_size) {

@@ -55,7 +55,7 @@ void SplineSamplingPlanner::initializeSampling(const mjModel* m, const Task& tas
   model_ = m;
   settings_ = settings;
   task_ = task.clone();
-  space_.initialize(m, settings.synergies);
+  space_.initialize(m, settings.synergies, settings.tension_step_weight);
   task_->bind(m, space_.size() - m->nu);
   pool_ = std::make_unique<adroit::ThreadPool>(settings.threads);
   workspaces_.resize(pool_->size());
@@ -98,6 +98,8 @@ int SplineSamplingPlanner::beginOptimize() {
   mju_copy(initial_.data(), state_.qpos.data(), m->nq);
   mju_copy(initial_.data() + m->nq, state_.qvel.data(), m->nv);
   if (m->na) mju_copy(initial_.data() + m->nq + m->nv, state_.act.data(), m->na);
+  if (have_best_) space_.holdApplied(best_, state_.time);
+  else space_.forgetApplied();
   return mean_.shiftTo(state_.time, settings_.horizon);
 }
 

@@ -8,6 +8,8 @@
 #include <adroit_mpc/mpc_runner.h>
 #include <gtest/gtest.h>
 
+#include "goal_task.h"
+
 #include <atomic>
 #include <cmath>
 #include <cstdlib>
@@ -39,83 +41,12 @@ using namespace adroit_mpc;
 
 namespace {
 
-const char* kPointMass = R"(
-<mujoco><compiler autolimits="true"/>
-  <option timestep="0.01" gravity="0 0 0"/>
-  <worldbody>
-    <body name="mass">
-      <joint name="x" type="slide" axis="1 0 0" damping="0.2"/>
-      <joint name="y" type="slide" axis="0 1 0" damping="0.2"/>
-      <geom type="sphere" size="0.05" mass="1" contype="0" conaffinity="0"/>
-    </body>
-  </worldbody>
-  <actuator>
-    <motor joint="x" ctrlrange="-1 1"/>
-    <motor joint="y" ctrlrange="-1 1"/>
-  </actuator>
-</mujoco>)";
+using test::kPointMass;
 
-// |q - goal|^2 + 0.1 |v|^2 + 0.01 |u|^2 (terminal x10) with exact Gauss-Newton derivatives.
-// poison: every cost NaN (a diverging solve). observe() reports the task's label when asked.
-class GoalTask : public Task {
- public:
-  GoalTask(double gx, double gy, std::string label = "goal") : goal_{gx, gy}, label_(std::move(label)) {}
-  std::string name() const override { return "goal"; }
-  std::unique_ptr<Task> clone() const override { return std::make_unique<GoalTask>(*this); }
-  void copyParametersFrom(const Task& other) override {
-    const auto& o = dynamic_cast<const GoalTask&>(other);
-    goal_[0] = o.goal_[0], goal_[1] = o.goal_[1];
-    poison = o.poison;
-  }
-  void bind(const mjModel*, int) override {}
-  std::unique_ptr<TaskScratch> makeScratch(const mjModel*) const override { return std::make_unique<TaskScratch>(); }
-  double runningCost(const mjModel*, const mjData* d, const Eigen::VectorXd& u, double, TaskScratch&) const override {
-    return cost(d, 1, nullptr) + 0.01 * u.squaredNorm();
-  }
-  double terminalCost(const mjModel*, const mjData* d, double, TaskScratch&) const override { return cost(d, 10, nullptr); }
-  double runningCostDerivatives(const mjModel*, const mjData* d, const Eigen::VectorXd& u, double, TaskScratch&,
-                                CostDerivatives& out) const override {
-    out.setZero();
-    out.lu = 0.02 * u;
-    out.luu.diagonal().setConstant(0.02);
-    return cost(d, 1, &out) + 0.01 * u.squaredNorm();
-  }
-  double terminalCostDerivatives(const mjModel*, const mjData* d, double, TaskScratch&,
-                                 CostDerivatives& out) const override {
-    out.setZero();
-    return cost(d, 10, &out);
-  }
-  std::vector<TaskEvent> observe(const mjModel*, const mjData*, double) override {
-    if (!report) return {};
-    return {{"label", label_}};
-  }
-  std::vector<std::string> weightNames() const override { return {}; }
-  double weight(const std::string&) const override { return 0; }
-  void setWeight(const std::string&, double) override {}
-  double error(const mjModel*, const mjData* d) const override {
-    return std::hypot(d->qpos[0] - goal_[0], d->qpos[1] - goal_[1]);
-  }
-  bool poison = false, report = false;
-
- private:
-  double cost(const mjData* d, double scale, CostDerivatives* out) const {
-    if (poison) return std::numeric_limits<double>::quiet_NaN();
-    double c = 0;
-    for (int i = 0; i < 2; ++i) {
-      const double e = d->qpos[i] - goal_[i], v = d->qvel[i];
-      c += scale * (e * e + 0.1 * v * v);
-      if (out) {
-        out->lx[i] += 2 * scale * e;
-        out->lxx(i, i) += 2 * scale;
-        out->lx[2 + i] += 0.2 * scale * v;
-        out->lxx(2 + i, 2 + i) += 0.2 * scale;
-      }
-    }
-    return c;
-  }
-  double goal_[2];
-  std::string label_;
-};
+// |q - goal|^2 + 0.1 |v|^2 + 0.01 |u|^2 (terminal x10), the label as an event when asked.
+std::unique_ptr<test::GoalTask> goalTask(double gx, double gy, std::string label = "goal") {
+  return std::make_unique<test::GoalTask>(std::vector<double>{gx, gy}, 1.0, 0.1, 0.01, std::move(label));
+}
 
 PlannerSettings smallSettings() {
   PlannerSettings s;
@@ -123,6 +54,7 @@ PlannerSettings smallSettings() {
   s.dt = 0.01;
   s.threads = 1;
   s.synergies = false;
+  s.tension_step_weight = 0;  // the plans the task alone asks for (the goal's direction at knot 0)
   return s;
 }
 
@@ -137,10 +69,10 @@ PlannerState pointState(double time, double x, double y, double vx = 0, double v
 struct Fixture {
   explicit Fixture(RunnerSettings rs) {
     model = adroit::loadModelString(kPointMass).model;
-    runner = std::make_unique<MpcRunner>(model.get(), makePlanner("ilqg"), std::make_unique<GoalTask>(0.3, -0.2),
+    runner = std::make_unique<MpcRunner>(model.get(), makePlanner("ilqg"), goalTask(0.3, -0.2),
                                          smallSettings(), std::move(rs));
   }
-  GoalTask& task() { return static_cast<GoalTask&>(runner->task()); }
+  test::GoalTask& task() { return static_cast<test::GoalTask&>(runner->task()); }
   adroit::ModelPtr model;
   std::unique_ptr<MpcRunner> runner;
 };
@@ -223,7 +155,7 @@ TEST(MpcRunner, RealTimeLatencyIsOnTheRobotsClockAndThePlanTakesOverOnPublicatio
 
 TEST(MpcRunner, RealTimeNeedsTheRobotsClock) {
   auto model = adroit::loadModelString(kPointMass).model;
-  EXPECT_THROW(MpcRunner(model.get(), makePlanner("ilqg"), std::make_unique<GoalTask>(0, 0), smallSettings(),
+  EXPECT_THROW(MpcRunner(model.get(), makePlanner("ilqg"), goalTask(0, 0), smallSettings(),
                          RunnerSettings{}),
                std::invalid_argument);
 }
@@ -361,7 +293,7 @@ TEST(MpcRunner, AReplacedTaskIsObservedAndPlannedAndAHorizonChangeReinitialises)
   r.planOnce(pointState(0.1, 0, 0));
   {
     std::lock_guard<std::mutex> lock(r.taskMutex());
-    auto other = std::make_unique<GoalTask>(-0.3, 0.2, "other");
+    auto other = goalTask(-0.3, 0.2, "other");
     other->report = true;
     r.replaceTask(std::move(other));
     r.setHorizon(0.2);

@@ -8,123 +8,29 @@
 #include <adroit_mpc/sampling_planner.h>
 #include <gtest/gtest.h>
 
+#include "goal_task.h"
+
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <string>
 #include <tuple>
+#include <vector>
 
 using namespace adroit_mpc;
 
 namespace {
 
-// Quadratic cost on hinge/slide coordinates: w_p |q - goal|^2 + w_v |v|^2 + w_u |u|^2,
-// terminal x10. Exact Gauss-Newton derivatives (the model has only scalar joints, dq = dqpos).
-class GoalTask : public Task {
- public:
-  GoalTask(std::vector<double> goal, double w_p, double w_v, double w_u)
-      : goal_(std::move(goal)), w_p_(w_p), w_v_(w_v), w_u_(w_u) {}
-  std::string name() const override { return "goal"; }
-  std::unique_ptr<Task> clone() const override { return std::make_unique<GoalTask>(*this); }
-  void copyParametersFrom(const Task& other) override {
-    const auto* o = dynamic_cast<const GoalTask*>(&other);
-    if (!o) throw std::invalid_argument("not a GoalTask");
-    goal_ = o->goal_;
-    poison_ = o->poison_;
-  }
-  void bind(const mjModel* m, int synergy_dims) override {
-    nv_ = m->nv;
-    nu_ = m->nu + synergy_dims;
-  }
-  std::unique_ptr<TaskScratch> makeScratch(const mjModel*) const override { return std::make_unique<TaskScratch>(); }
-  double runningCost(const mjModel* m, const mjData* d, const Eigen::VectorXd& u, double, TaskScratch&) const override {
-    return stateCost(m, d, 1.0, nullptr) + w_u_ * u.squaredNorm();
-  }
-  double terminalCost(const mjModel* m, const mjData* d, double, TaskScratch&) const override {
-    return stateCost(m, d, 10.0, nullptr);
-  }
-  double runningCostDerivatives(const mjModel* m, const mjData* d, const Eigen::VectorXd& u, double, TaskScratch&,
-                                CostDerivatives& out) const override {
-    out.setZero();
-    out.lu = 2 * w_u_ * u;
-    out.luu.diagonal().setConstant(2 * w_u_);
-    return stateCost(m, d, 1.0, &out) + w_u_ * u.squaredNorm();
-  }
-  double terminalCostDerivatives(const mjModel* m, const mjData* d, double, TaskScratch&,
-                                 CostDerivatives& out) const override {
-    out.setZero();
-    return stateCost(m, d, 10.0, &out);
-  }
-  std::vector<std::string> weightNames() const override { return {}; }
-  double weight(const std::string&) const override { return 0; }
-  void setWeight(const std::string&, double) override {}
-  double error(const mjModel*, const mjData* d) const override {
-    double e = 0;
-    for (std::size_t i = 0; i < goal_.size(); ++i) e += (d->qpos[i] - goal_[i]) * (d->qpos[i] - goal_[i]);
-    return std::sqrt(e);
-  }
-  bool poison_ = false;  // every cost NaN (a diverging task)
-
- private:
-  double stateCost(const mjModel*, const mjData* d, double scale, CostDerivatives* out) const {
-    if (poison_) return std::numeric_limits<double>::quiet_NaN();
-    double c = 0;
-    for (std::size_t i = 0; i < goal_.size(); ++i) {
-      const double e = d->qpos[i] - goal_[i];
-      c += scale * w_p_ * e * e;
-      if (out) {
-        out->lx[i] += 2 * scale * w_p_ * e;
-        out->lxx(i, i) += 2 * scale * w_p_;
-      }
-    }
-    for (int i = 0; i < nv_; ++i) {
-      c += scale * w_v_ * d->qvel[i] * d->qvel[i];
-      if (out) {
-        out->lx[nv_ + i] += 2 * scale * w_v_ * d->qvel[i];
-        out->lxx(nv_ + i, nv_ + i) += 2 * scale * w_v_;
-      }
-    }
-    return c;
-  }
-  std::vector<double> goal_;
-  double w_p_, w_v_, w_u_;
-  int nv_ = 0, nu_ = 0;
-};
-
-const char* kPointMass = R"(
-<mujoco><compiler autolimits="true"/>
-  <option timestep="0.01" gravity="0 0 0"/>
-  <worldbody>
-    <body name="mass">
-      <joint name="x" type="slide" axis="1 0 0" damping="0.2"/>
-      <joint name="y" type="slide" axis="0 1 0" damping="0.2"/>
-      <geom type="sphere" size="0.05" mass="1" contype="0" conaffinity="0"/>
-    </body>
-  </worldbody>
-  <actuator>
-    <motor joint="x" ctrlrange="-1 1"/>
-    <motor joint="y" ctrlrange="-1 1"/>
-  </actuator>
-</mujoco>)";
-
-const char* kPendulum = R"(
-<mujoco><compiler autolimits="true"/>
-  <option timestep="0.01"/>
-  <worldbody>
-    <body name="pole">
-      <joint name="hinge" type="hinge" axis="0 1 0" damping="0.05"/>
-      <geom type="capsule" fromto="0 0 0 0 0 -0.5" size="0.02" mass="0" contype="0" conaffinity="0"/>
-      <geom type="sphere" pos="0 0 -0.5" size="0.05" mass="1" contype="0" conaffinity="0"/>
-    </body>
-  </worldbody>
-  <actuator>
-    <motor joint="hinge" ctrlrange="-4 4"/>
-  </actuator>
-</mujoco>)";
+using test::GoalTask;
+using test::kPendulum;
+using test::kPointMass;
 
 struct ClosedLoopResult {
   double final_error = 0;
   bool controls_in_range = true;
   int diverged = 0;
+  double action_steps = 0;  // sum of squared changes of the applied controls between simulation steps
 };
 
 // Plans every `period` seconds and applies the policy's action to a separate simulation.
@@ -145,7 +51,9 @@ ClosedLoopResult closedLoop(Planner& planner, const mjModel* m, GoalTask& task, 
     if (planner.optimize().diverged) ++result.diverged;
     planner.policy(policy);
     for (int k = 0; k < steps_per_period; ++k) {
+      const std::vector<double> before(sim->ctrl, sim->ctrl + m->nu);
       policy.action(sim->time, sim->qpos, sim->qvel, sim->act, sim->ctrl);
+      for (int i = 0; i < m->nu && sim->time > 0; ++i) result.action_steps += std::pow(sim->ctrl[i] - before[i], 2);
       for (int i = 0; i < m->nu; ++i)
         if (sim->ctrl[i] < m->actuator_ctrlrange[2 * i] || sim->ctrl[i] > m->actuator_ctrlrange[2 * i + 1])
           result.controls_in_range = false;
@@ -155,6 +63,8 @@ ClosedLoopResult closedLoop(Planner& planner, const mjModel* m, GoalTask& task, 
   result.final_error = task.error(m, sim.get());
   return result;
 }
+
+constexpr double kStepWeight = 3;
 
 PlannerSettings smallSettings(double horizon) {
   PlannerSettings s;
@@ -178,6 +88,35 @@ TEST(Planners, IlqgDrivesPointMassToGoal) {
   EXPECT_LT(r.final_error, 0.02);
   EXPECT_TRUE(r.controls_in_range);
   EXPECT_EQ(r.diverged, 0);
+}
+
+// The planners weigh the tension step cost (PlannerSettings::tension_step_weight): from the
+// same state, the plan's control steps from knot to knot shrink with it, and the plan still
+// heads for the goal.
+TEST(Planners, StepCostShrinksThePlansControlSteps) {
+  auto m = adroit::loadModelString(kPointMass).model;
+  GoalTask task({0.3, -0.2}, 10.0, 0.1, 0.01);
+  PlannerState start;
+  start.qpos = {0, 0};
+  start.qvel = {0, 0};
+  for (const std::string name : {"ilqg", "cem"}) {
+    double steps[2] = {0, 0}, distance[2] = {0, 0};
+    for (int with = 0; with < 2; ++with) {
+      PlannerSettings s = smallSettings(0.5);
+      s.tension_step_weight = with ? kStepWeight : 0.0;
+      auto planner = makePlanner(name);
+      planner->initialize(m.get(), task, s);
+      planner->setState(start);
+      for (int k = 0; k < 30; ++k) planner->optimize();
+      const Trajectory& plan = planner->bestTrajectory();
+      for (std::size_t t = 1; t < plan.ctrl.size(); ++t) steps[with] += (plan.ctrl[t] - plan.ctrl[t - 1]).squaredNorm();
+      distance[with] = std::hypot(plan.states.back()[0] - 0.3, plan.states.back()[1] + 0.2);
+    }
+    std::printf("%s: the plan's squared control steps %.4f without the cost, %.4f with it; its end %.3f / %.3f m "
+                "from the goal\n", name.c_str(), steps[0], steps[1], distance[0], distance[1]);
+    EXPECT_LT(steps[1], 0.5 * steps[0]) << name;
+    EXPECT_LT(distance[1], distance[0] + 0.02) << name;  // as far towards the goal within 2 cm
+  }
 }
 
 TEST(Planners, SamplingDrivesPointMassToGoal) {
@@ -234,7 +173,7 @@ TEST(Planners, DivergingTaskIsReportedAndThePolicyKept) {
     PlanPolicy before, after;
     planner->policy(before);
     GoalTask poisoned = task;
-    poisoned.poison_ = true;
+    poisoned.poison = true;
     planner->setTask(poisoned);
     EXPECT_TRUE(planner->optimize().diverged) << kind;
     planner->policy(after);
@@ -284,6 +223,16 @@ TEST(Planners, BadSettingsAndNamesAreRejected) {
       ADD_FAILURE() << "expected invalid_argument for " << name;
     } catch (const std::invalid_argument& e) {
       EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
+    }
+  }
+  for (const double weight : {-1.0, std::numeric_limits<double>::quiet_NaN()}) {
+    s = smallSettings(0.5);
+    s.tension_step_weight = weight;
+    try {
+      planner.initialize(m.get(), task, s);
+      ADD_FAILURE() << "expected invalid_argument for tension_step_weight " << weight;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("tension_step_weight"), std::string::npos) << e.what();
     }
   }
   s = smallSettings(0.5);
@@ -363,27 +312,30 @@ TEST(Cem, DrivesPointMassToGoal) {
 
 TEST(SamplingPlanners, CostNeverRisesForAFixedState) {
   auto m = adroit::loadModelString(kPendulum).model;
-  for (const char* kind : {"sampling", "cem"}) {
-    GoalTask task({0.6}, 10.0, 0.1, 0.001);
-    auto planner = makePlanner(kind);
-    PlannerSettings s = smallSettings(0.5);
-    s.samples = 8;
-    s.cem_elites = 3;
-    planner->initialize(m.get(), task, s);
-    double previous = std::numeric_limits<double>::infinity(), first = 0;
-    for (int i = 0; i < 15; ++i) {
-      OptimizeReport r = planner->optimize();  // the state stays at t = 0
-      if (i == 0) first = r.cost_before;
-      EXPECT_LE(r.cost_after, r.cost_before) << kind << " iteration " << i;
-      EXPECT_LE(r.cost_after, previous) << kind << " iteration " << i;
-      if (i > 0) {
-        EXPECT_EQ(r.cost_before, previous) << kind << ": the previous plan is candidate 0";
+  for (const double step_weight : {0.0, kStepWeight})
+    for (const char* kind : {"sampling", "cem"}) {
+      GoalTask task({0.6}, 10.0, 0.1, 0.001);
+      auto planner = makePlanner(kind);
+      PlannerSettings s = smallSettings(0.5);
+      s.samples = 8;
+      s.cem_elites = 3;
+      s.tension_step_weight = step_weight;
+      planner->initialize(m.get(), task, s);
+      double previous = std::numeric_limits<double>::infinity(), first = 0;
+      for (int i = 0; i < 15; ++i) {
+        OptimizeReport r = planner->optimize();  // the state stays at t = 0
+        if (i == 0) first = r.cost_before;
+        EXPECT_LE(r.cost_after, r.cost_before) << kind << " iteration " << i;
+        EXPECT_LE(r.cost_after, previous) << kind << " iteration " << i;
+        // Candidate 0 is the previous plan. With the step cost its first knot is now priced
+        // against itself (the plan in effect at t = 0), so it costs at most what it did.
+        if (i > 0 && step_weight == 0) EXPECT_EQ(r.cost_before, previous) << kind << ": the previous plan is candidate 0";
+        if (i > 0) EXPECT_LE(r.cost_before, previous) << kind << ", step weight " << step_weight;
+        EXPECT_EQ(planner->bestTrajectory().cost, r.cost_after) << kind;
+        previous = r.cost_after;
       }
-      EXPECT_EQ(planner->bestTrajectory().cost, r.cost_after) << kind;
-      previous = r.cost_after;
+      EXPECT_LT(previous, 0.5 * first) << kind << ": the iterations did lower the cost";
     }
-    EXPECT_LT(previous, 0.5 * first) << kind << ": the iterations did lower the cost";
-  }
 }
 
 TEST(Cem, OneEliteClampsTheStdAtItsMinimumAndThePlanIsTheMean) {

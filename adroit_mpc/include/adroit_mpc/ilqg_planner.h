@@ -39,6 +39,8 @@ class IlqgPlanner : public Planner {
  private:
   void warmStartRollout(OptimizeReport& report);
   void computeCostDerivatives();
+  // The tension step cost's derivatives (ControlSpace::addStepDerivatives) into lq_ per knot.
+  void addStepDerivatives();
   bool lineSearch(const adroit::BackwardPassResult& pass, OptimizeReport& report);
   void publish();
 

@@ -63,6 +63,13 @@ struct PlannerSettings {
   int cem_elites = 4;
   double cem_std_initial = 0.2;
   double cem_std_min = 0.05;  // the floor keeps the MPC exploring as the state moves on
+  // The cost of stepping the tendon tensions from one knot to the next (every planner, in its
+  // rollouts): 0.5 w sum_a ((ctrl_a(t) - ctrl_a(t - 1)) / range_a)^2 per knot, the first knot
+  // against what the previous plan applies at its start. A cylinder follows a tension only as
+  // fast as its chamber fills (time constant ~20 ms, thesis 8.1), so a plan that steps a tendon
+  // across its range in one knot cannot be tracked. 0: no such cost. At 1 a full-range step
+  // costs 0.5 per tendon (README "Plans the cylinders can follow").
+  double tension_step_weight = 1.0;
 };
 
 // Time split of one optimize() (thesis table 6.2), seconds.
@@ -140,11 +147,15 @@ int validatePlannerSettings(const mjModel* model, const PlannerSettings& setting
 // std::invalid_argument naming the sizes when they do not match the model.
 void copyPlannerState(const mjModel* model, const PlannerState& in, PlannerState& out);
 
+struct KnotTrajectory;
+
 // The planner's control space [actuators | synergies], its box (ctrlrange; [-1, 1] for the
-// synergies) and the map to model controls.
+// synergies), the map to model controls, and the cost of stepping the model controls between
+// knots (PlannerSettings::tension_step_weight).
 class ControlSpace {
  public:
-  void initialize(const mjModel* model, bool synergies);  // allocates; throws (unlimited ctrl)
+  // Allocates; throws (unlimited ctrl, negative or non-finite step weight).
+  void initialize(const mjModel* model, bool synergies, double step_weight = 0);
   int size() const { return static_cast<int>(lower_.size()); }
   int actuators() const { return nu_; }
   bool hasSynergies() const { return has_synergies_; }
@@ -162,12 +173,30 @@ class ControlSpace {
   // The safe warm start: every actuator at its minimum tension, synergies at rest.
   void safeControls(Eigen::VectorXd& u) const;
 
+  // The model controls in effect when the next plan starts: `plan`'s at `time` (linear between
+  // its knots, its ends held). The first knot's step is costed against them; forgetApplied():
+  // no plan runs, the first knot is free. Call between rollouts (not thread-safe); no allocation.
+  void holdApplied(const KnotTrajectory& plan, double time);
+  void forgetApplied() { has_applied_ = false; }
+  double stepWeight() const { return step_weight_; }
+  // The step cost of knot t of `plan` (its ctrl filled up to knot t).
+  double stepCost(const KnotTrajectory& plan, int t) const;
+  // Its gradient and Gauss-Newton Hessian in the planner controls of knot t, the neighbouring
+  // knots held at `plan`'s controls (knot t's cost and knot t + 1's), added to lu and luu.
+  // Uses member scratch: call from one thread. No allocation.
+  void addStepDerivatives(const KnotTrajectory& plan, int t, Eigen::VectorXd& lu, Eigen::MatrixXd& luu) const;
+
  private:
   int nu_ = 0;
   bool has_synergies_ = false;
   Synergies synergies_;
   Eigen::VectorXd lower_, upper_;
-  mutable Eigen::VectorXd ctrl_, mask_;
+  double step_weight_ = 0;
+  Eigen::VectorXd step_scale_;  // w / range^2 per actuator
+  Eigen::VectorXd applied_;
+  bool has_applied_ = false;
+  mutable Eigen::VectorXd ctrl_, mask_, step_gradient_, step_curvature_;
+  mutable Eigen::MatrixXd scaled_map_;  // diag(curvature) S
 };
 
 // A rolled-out plan: T knots of controls and T + 1 states, with the per-knot costs.
@@ -244,7 +273,7 @@ void rollout(const mjModel* m, const ControlSpace& space, const Eigen::VectorXd&
     space.toCtrl(out.controls[t], out.ctrl[t].data());
     mju_copy(d->ctrl, out.ctrl[t].data(), m->nu);
     mj_forward(m, d);
-    out.costs[t] = knot_cost(t, d, out.controls[t]);
+    out.costs[t] = knot_cost(t, d, out.controls[t]) + space.stepCost(out, t);
     out.total += out.costs[t];
     integrateAfterForward(m, d);
   }

@@ -351,6 +351,7 @@ class TrialRunner {
       // pressure sensor's delay.
       audit_dead_time_ = pneumatics::PlantOptions{}.tube_delay + (config.sensors.enabled ? config.sensors.cylinder_delay : 0);
       preview_audit_ = std::make_unique<pneumatics::PreviewAudit>(groups, std::vector<double>(kPreviewLeads.begin(), kPreviewLeads.end()));
+      step_audit_ = std::make_unique<pneumatics::ReferenceStepAudit>(groups);
     }
   }
 
@@ -650,7 +651,8 @@ class TrialRunner {
         if (!verdict.ok()) throw std::runtime_error("pool rejected the policy's reference: " + verdict.detail);
         preview_audit_->addReference(now, dt, static_cast<std::size_t>(samples),
                                      {reference_.begin(), reference_.begin() + samples * m->nu});
-        recordPlanSteps(samples, m->nu);
+        step_audit_->addReference(static_cast<std::size_t>(samples), reference_.data(),
+                                  static_cast<std::size_t>(samples * m->nu));
         recordForceTracking(sensed);
       }
     } else if (runner_->hasPolicy() && sent_.steps > 0) {  // the last plan's tensions, interpolated at now
@@ -798,28 +800,13 @@ class TrialRunner {
     row.insert(row.end(), floor.begin(), floor.end());
     force_trace_.push_back(std::move(row));
   }
-  // The reference's largest tension step from one knot to the next, per group of cylinders
-  // (what force_tracking_audit reports of the demo's plans).
-  // Also their 99th percentile: the largest is one event, the percentile the plans' habit.
-  void recordPlanSteps(int samples, int nu) {
-    for (int k = 1; k < samples; ++k)
-      for (int j = 0; j < nu; ++j) {
-        const double step = std::abs(reference_[k * nu + j] - reference_[(k - 1) * nu + j]);
-        double& largest = max_plan_step_[audited_[j].group];
-        largest = std::max(largest, step);
-        auto& histogram = plan_step_histogram_[audited_[j].group];
-        ++histogram[std::min(histogram.size() - 1, static_cast<std::size_t>(step / kStepBin))];
-      }
-  }
-  static constexpr double kStepBin = 0.1;  // N
-  std::map<std::string, double> max_plan_step_;  // N per knot, over every trial so far
-  std::map<std::string, std::array<long, 1000>> plan_step_histogram_;  // kStepBin bins
   std::vector<std::vector<double>> force_trace_;  // this trial: time, planned, sensed and per-tick floor tensions
   std::vector<double> reference_, force_;
   std::vector<double> pool_seconds_;  // wall time of each pool tick (all cylinders)
   std::vector<pneumatics::ForceTrackingAudit::Cylinder> audited_;  // pneumatic variants
   std::unique_ptr<pneumatics::ForceTrackingAudit> force_audit_;
   std::unique_ptr<pneumatics::PreviewAudit> preview_audit_;  // policy reference only: given at the tick, from it
+  std::unique_ptr<pneumatics::ReferenceStepAudit> step_audit_;  // the references' steps per knot, every trial
   double audit_dead_time_ = 0;  // s
   std::vector<double> volume_, volume_rate_;
   double last_floor_time_ = 0;
@@ -838,18 +825,8 @@ class TrialRunner {
     return preview_audit_ ? preview_audit_->groups() : std::map<std::string, std::vector<double>>{};
   }
   double auditDeadTime() const { return audit_dead_time_; }
-  // Pneumatic variants: per group, the policy references' largest tension step per knot [N].
-  const std::map<std::string, double>& maxPlanStep() const { return max_plan_step_; }
-  // ... and the 99th percentile of those steps [N] (upper edge of its 0.1 N bin; 0 if none).
-  double planStepPercentile99(const std::string& group) const {
-    const auto it = plan_step_histogram_.find(group);
-    if (it == plan_step_histogram_.end()) return 0;
-    long total = 0, seen = 0;
-    for (const long n : it->second) total += n;
-    for (std::size_t b = 0; b < it->second.size(); ++b)
-      if ((seen += it->second[b]) >= 0.99 * total) return (b + 1) * kStepBin;
-    return it->second.size() * kStepBin;
-  }
+  // Pneumatic variants: the policy references' tension steps per knot (null in force mode).
+  const pneumatics::ReferenceStepAudit* stepAudit() const { return step_audit_.get(); }
   static constexpr std::array<double, 3> kPreviewLeads = {0.005, 0.01, 0.02};  // s
 
  private:
@@ -1209,10 +1186,10 @@ void printPoolAudit(const TrialRunner& runner) {
     if (preview.count(group) && preview.at(group).size() == 3 && std::isfinite(preview.at(group)[0]))
       std::snprintf(ahead, sizeof ahead, "%.2f / %.2f / %.2f", preview.at(group)[0], preview.at(group)[1],
                     preview.at(group)[2]);
-    const auto step = runner.maxPlanStep().find(group);
+    const pneumatics::ReferenceStepAudit* steps = runner.stepAudit();
     std::printf("%-9s %-14s   %-6s %6.2f %6.2f %8.2f %10.2f %8.1f %9.1f %9.1f %20s\n", "", "", group.c_str(), f.rmse,
                 f.floor, f.per_tick, f.per_tick > 0 ? f.rmse / f.per_tick : 0.0, f.max_reference,
-                step == runner.maxPlanStep().end() ? 0.0 : step->second, runner.planStepPercentile99(group), ahead);
+                steps ? steps->largest(group) : 0.0, steps ? steps->percentile99(group) : 0.0, ahead);
   }
 }
 

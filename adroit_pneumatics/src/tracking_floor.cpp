@@ -240,4 +240,40 @@ std::map<std::string, std::vector<double>> PreviewAudit::groups() const {
   return out;
 }
 
+ReferenceStepAudit::ReferenceStepAudit(std::vector<std::string> groups) : groups_(std::move(groups)) {
+  for (const auto& g : groups_) histogram_.emplace(g, std::vector<long>(1000, 0));
+}
+
+void ReferenceStepAudit::addReference(std::size_t steps, const double* forces, std::size_t size) {
+  const std::size_t n = groups_.size();
+  if (n == 0 || size != steps * n) return;
+  for (std::size_t k = 1; k < steps; ++k)
+    for (std::size_t j = 0; j < n; ++j) {
+      const double step = std::abs(forces[k * n + j] - forces[(k - 1) * n + j]);
+      if (!std::isfinite(step)) continue;
+      double& largest = largest_[groups_[j]];
+      largest = std::max(largest, step);
+      std::vector<long>& bins = histogram_[groups_[j]];
+      ++bins[std::min(bins.size() - 1, static_cast<std::size_t>(step / kBin))];
+    }
+}
+
+double ReferenceStepAudit::largest(const std::string& group) const {
+  const auto it = largest_.find(group);
+  return it == largest_.end() ? 0.0 : it->second;
+}
+
+double ReferenceStepAudit::percentile99(const std::string& group) const {
+  const auto it = histogram_.find(group);
+  if (it == histogram_.end()) return 0.0;
+  long total = 0, seen = 0;
+  for (const long count : it->second) total += count;
+  if (total == 0) return 0.0;
+  // The bin's upper edge, but never above the largest step (which is exact).
+  for (std::size_t b = 0; b < it->second.size(); ++b)
+    if ((seen += it->second[b]) >= 0.99 * static_cast<double>(total))
+      return std::min(static_cast<double>(b + 1) * kBin, largest(group));
+  return largest(group);
+}
+
 }  // namespace adroit::pneumatics

@@ -133,7 +133,8 @@ TEST(ForceAuditBag, ReportsTheErrorInTheBag) {
   EXPECT_NE(a.out.find("0.00 / 0.00 / 0.00"), std::string::npos) << a.out;
   // The ramps rise 10 N/s: 0.1 N from one 10 ms knot to the next; the ratio to the floor read
   // through the sensor is a RESULT of its own.
-  EXPECT_NE(a.out.find("the plans' largest tension step per knot 0.1 N; the floor read through the sensor"),
+  EXPECT_NE(a.out.find("the plans' tension step per knot: largest 0.1 N, 99th percentile 0.1 N; the floor read through "
+                       "the sensor"),
             std::string::npos) << a.out;
   EXPECT_NE(b.out.find("RESULT adroit_pneumatics/demo_force_floor_ratio_FF "), std::string::npos) << b.out;
   const AuditRun exact_floor = audit(off, {"--floor-sensor", "none"});

@@ -201,3 +201,25 @@ TEST(PreviewAudit, MeasuresHowFarThePreviewMissed) {
   audit.addSample(0.06, {10.0});
   EXPECT_DOUBLE_EQ(audit.groups().at("FF")[0], 0.0);
 }
+
+TEST(ReferenceStepAudit, LargestAndPercentilePerGroup) {
+  // Two columns in group A, one in B; 101 rows. A's first column climbs 0.5 N a row and jumps
+  // 30 N once; its second holds; B climbs 2 N a row.
+  ReferenceStepAudit audit({"A", "A", "B"});
+  const std::size_t rows = 101, n = 3;
+  std::vector<double> forces(rows * n);
+  for (std::size_t k = 0; k < rows; ++k) {
+    forces[k * n] = 0.5 * k + (k >= 50 ? 30.0 : 0.0);
+    forces[k * n + 1] = 5.0;
+    forces[k * n + 2] = 2.0 * k;
+  }
+  audit.addReference(rows, forces.data(), forces.size());
+  EXPECT_NEAR(audit.largest("A"), 30.5, 1e-12);
+  EXPECT_NEAR(audit.largest("B"), 2.0, 1e-12);
+  // A: 200 steps, 100 of 0 N, 99 of 0.5 N, one of 30.5 N: its 99th percentile is a 0.5 N step.
+  EXPECT_NEAR(audit.percentile99("A"), 0.5 + ReferenceStepAudit::kBin, 1e-9);
+  EXPECT_NEAR(audit.percentile99("B"), 2.0, 1e-9);  // every step 2 N: the bin's edge is capped at the largest
+  EXPECT_EQ(audit.largest("C"), 0.0);
+  audit.addReference(2, forces.data(), 5);  // a wrong size changes nothing
+  EXPECT_NEAR(audit.largest("A"), 30.5, 1e-12);
+}

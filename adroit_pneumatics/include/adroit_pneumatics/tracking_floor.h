@@ -146,4 +146,24 @@ class PreviewAudit {
   std::map<std::string, std::vector<long>> counts_;
 };
 
+// How far a reference's tension moves from one row to the next (one plan knot), per group of
+// columns: the largest step, and the 99th percentile (the largest is one event; the
+// percentile is the plans' habit). Steps are binned at 0.1 N up to 100 N (larger ones count
+// in the top bin; the largest is kept exactly).
+class ReferenceStepAudit {
+ public:
+  explicit ReferenceStepAudit(std::vector<std::string> groups);  // the group of each column
+  // One reference: `steps` rows of one value per column (N), row-major; a size that does not
+  // match the columns is ignored.
+  void addReference(std::size_t steps, const double* forces, std::size_t size);
+  double largest(const std::string& group) const;        // N; 0 for a group without steps
+  double percentile99(const std::string& group) const;   // N: its bin's upper edge, at most largest()
+  static constexpr double kBin = 0.1;                    // N
+
+ private:
+  std::vector<std::string> groups_;
+  std::map<std::string, double> largest_;
+  std::map<std::string, std::vector<long>> histogram_;
+};
+
 }  // namespace adroit::pneumatics

@@ -27,6 +27,8 @@ from stack_run import DriverWatch, StackCpu
 HERE = os.path.dirname(os.path.abspath(__file__))
 MPC_WAIT_S = 60.0
 CATCH_ARGS = ["_drop_height:=0.07", "_watch:=3.0", "_pause_at_end:=true"]  # as scripts/demo.sh
+RELOCATE_SETTLE_S = 1.5  # after the MPC's first plan: the pools lift the sagged arm to its posture
+                         # (mpc_success's pneumatic pre-roll), as a user waits before dropping a ball
 RELOCATE_HOLD_S = 0.4   # the ball held at its start before it is let go (demo_report's drop_hold)
 RELOCATE_GOAL_DELAY_S = 1.0  # mpc_success kRelocateGoalDelay
 RELOCATE_GOAL_TIME_S = 3.0   # from the goal to the verdict (mpc_success: 3 s)
@@ -183,6 +185,7 @@ def probe_relocate(p):
     start_xyz, goal_xyz = [[h + d for h, d in zip(hold, p[k])] for k in ("start", "goal")]
     start, goal_pose = pose_at(start_xyz), pose_at(goal_xyz)
 
+    time.sleep(RELOCATE_SETTLE_S)
     with window:
         hold_until = time.monotonic() + RELOCATE_HOLD_S
         while time.monotonic() < hold_until:  # held still above the hand, as a person's hand would

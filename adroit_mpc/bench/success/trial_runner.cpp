@@ -28,7 +28,11 @@ namespace {
 // ~50 ms per iteration).
 constexpr int kWarmupIterations = 10;
 // Closed loop with the object held at its start before it is let go (s of simulated time).
+// Pneumatic mode needs longer: the pools fill the arm's cylinders from atmosphere, and after
+// 0.3 s the shoulder (ARJ2) was still sagging 0.28 rad under the arm's weight; by 1.5 s it
+// holds its posture, as a running stack does before anything is dropped into the hand.
 constexpr double kPreRoll = 0.3;
+constexpr double kPneumaticPreRoll = 1.5;
 
 }  // namespace
 
@@ -117,7 +121,7 @@ TrialResult TrialRunner::run(const TrialSpec& spec) {
   // tensions; a real hand is already holding its posture when the object is let go).
   Progress p;
   p.sequence_given = !idle_first;
-  p.release = robot_->data()->time + kPreRoll;
+  p.release = robot_->data()->time + (variant_.pneumatic ? kPneumaticPreRoll : kPreRoll);
   p.sequence = p.release + (idle_first ? idle_ : 0.0);
   p.end = p.sequence + (task_name_ == "type" ? 1.5 * spec.keys.size() + 0.5 : duration_);
   closedLoop(spec, p, r);

@@ -9,9 +9,9 @@ TaskParams RelocateTask::defaults() {
   p.strings = {{"scene", "ball"}, {"object_body", "object"}, {"object_joint", "object_root"},
                {"grasp_site", "S_grasp"}, {"release_keyframe", "rest"}, {"arm_joint_prefix", "ARJ"},
                {"wrist_joint_prefix", "WRJ"}};
-  p.numbers = {{"w_object_velocity", 0.5}, {"w_goal_position", 10.0}, {"w_goal_orientation", 0.0},
+  p.numbers = {{"w_object_velocity", 0.5}, {"w_goal_position", 20.0}, {"w_goal_orientation", 0.0},
                {"w_grasp", 12.0},           {"w_control", 0.1},       {"w_synergy", 0.08},
-               {"w_release_posture", 0.5}, {"w_arm_posture", 1.0}, {"w_wrist_posture", 5.0},
+               {"w_release_posture", 0.5}, {"w_arm_posture", 5.0}, {"w_wrist_posture", 5.0},
                {"terminal_scale", 10.0},   {"velocity_angular_scale", 0.035},
                {"position_smoothing", 0.02}, {"grasp_smoothing", 0.02}, {"goal_tolerance", 0.02},
                {"reach_radius", 0.25},

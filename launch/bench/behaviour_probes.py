@@ -27,9 +27,11 @@ from stack_run import DriverWatch, StackCpu
 HERE = os.path.dirname(os.path.abspath(__file__))
 MPC_WAIT_S = 60.0
 CATCH_ARGS = ["_drop_height:=0.07", "_watch:=3.0", "_pause_at_end:=true"]  # as scripts/demo.sh
-RELOCATE_SETTLE_S = 1.5  # after the MPC's first plan: the pools lift the sagged arm to its posture
-                         # (mpc_success's pneumatic pre-roll), as a user waits before dropping a ball
-RELOCATE_HOLD_S = 0.4   # the ball held at its start before it is let go (demo_report's drop_hold)
+# The ball held still at its start before it is let go, as long as mpc_success's pre-roll in
+# pneumatic relocation: the hand is ready when the ball falls. (With w_arm_posture 1 the arm
+# idled 0.35 rad below rest without the ball, and after the 0.4 s hold this was, the hand was
+# still rising into the released ball and threw it off.)
+RELOCATE_HOLD_S = 1.5
 RELOCATE_GOAL_DELAY_S = 1.0  # mpc_success kRelocateGoalDelay
 RELOCATE_GOAL_TIME_S = 3.0   # from the goal to the verdict (mpc_success: 3 s)
 RELOCATE_TOLERANCE = 0.03    # m
@@ -185,7 +187,6 @@ def probe_relocate(p):
     start_xyz, goal_xyz = [[h + d for h, d in zip(hold, p[k])] for k in ("start", "goal")]
     start, goal_pose = pose_at(start_xyz), pose_at(goal_xyz)
 
-    time.sleep(RELOCATE_SETTLE_S)
     with window:
         hold_until = time.monotonic() + RELOCATE_HOLD_S
         while time.monotonic() < hold_until:  # held still above the hand, as a person's hand would

@@ -232,6 +232,7 @@ def probe_type(p):
     s = typed["sequences"][0]
     result.update({"typed": s["typed"], "keys_right": s["right"], "keys": len(s["sequence"]),
                    "presses": s.get("presses"), "wrong_presses": s.get("wrong"), "unasked": len(typed["unasked"]),
+                   "events": s.get("events", []), "unasked_keys": typed["unasked"],
                    "success": s["right"] == len(s["sequence"]) and not typed["unasked"]})
     return result
 

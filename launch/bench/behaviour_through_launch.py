@@ -253,6 +253,10 @@ def run_task(task, args, log, cpu_rows):
         except (RuntimeError, subprocess.TimeoutExpired) as e:
             r = {"error": str(e)}
         rows.append(run_row(task, run, r))
+        if not rows[-1]["success"]:  # what the node reported, for reading the failure afterwards
+            log.write("==== %s run %d failed: %s\n" % (task, run + 1, json.dumps(
+                {k: r.get(k) for k in ("error", "typed", "events", "unasked_keys", "end", "goal") if k in r})))
+            log.flush()
         for node, classes in sorted(r.get("cores", {}).items()):
             for cls, value in sorted(classes.items()):
                 cpu_rows.append([task, run + 1, node, cls, "%.4f" % value])

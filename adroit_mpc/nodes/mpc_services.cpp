@@ -139,7 +139,9 @@ void MpcNode::onType(const std_msgs::String::ConstPtr& msg) {
   if (!runner_->task().setSequence(msg->data, &why)) {
     rejections_.count(kTaskCommand);
     ROS_ERROR_THROTTLE(1.0, "adroit_mpc: key sequence rejected: %s", why.c_str());
+    return;
   }
+  ROS_INFO("adroit_mpc: typing '%s'", msg->data.c_str());  // a user (and a failed run's log) sees it arrive
 }
 
 void MpcNode::setupGoalMarker() {

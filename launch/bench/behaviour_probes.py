@@ -28,9 +28,9 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 MPC_WAIT_S = 60.0
 CATCH_ARGS = ["_drop_height:=0.07", "_watch:=3.0", "_pause_at_end:=true"]  # as scripts/demo.sh
 # The ball held still at its start before it is let go, as long as mpc_success's pre-roll in
-# pneumatic relocation: the hand is ready when the ball falls. (With w_arm_posture 1 the arm
-# idled 0.35 rad below rest without the ball, and after the 0.4 s hold this was, the hand was
-# still rising into the released ball and threw it off.)
+# pneumatic relocation: the hand is ready when the ball falls. (It was 0.4 s; with
+# w_arm_posture 1 the arm idled 0.35 rad below rest without the ball, and the hand was still
+# rising into the released ball and threw it off.)
 RELOCATE_HOLD_S = 1.5
 RELOCATE_GOAL_DELAY_S = 1.0  # mpc_success kRelocateGoalDelay
 RELOCATE_GOAL_TIME_S = 3.0   # from the goal to the verdict (mpc_success: 3 s)

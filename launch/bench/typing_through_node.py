@@ -120,12 +120,11 @@ def probe(idle, sequences_arg):
             with lock:
                 done_at = next((t for t, e in events if t >= t0 and e.startswith("done")), None)
             time.sleep(0.05)
-        with lock:
+        with lock:  # the keys, and the node's events (s after the sequence) to read a failed run afterwards
             got = [k for t, k in typed if t >= t0]
+            seen = [[round(t - t0, 3), e] for t, e in events if t >= t0]
         right = keys_right(got, sequence)
         presses, wrong = presses_and_wrong(got, sequence)
-        with lock:  # the node's events from the sequence on (s after it), to read a failed run afterwards
-            seen = [[round(t - t0, 3), e] for t, e in events if t >= t0]
         results.append({"sequence": sequence, "typed": got, "right": right, "presses": presses, "wrong": wrong,
                         "seconds": (done_at or time.time()) - t0, "done": done_at is not None, "events": seen})
         time.sleep(1.0)  # the hand settles before the next sequence

@@ -123,7 +123,8 @@ TrialResult TrialRunner::run(const TrialSpec& spec) {
   // tensions; a real hand is already holding its posture when the object is let go).
   Progress p;
   p.sequence_given = !idle_first;
-  p.release = robot_->data()->time + (variant_.pneumatic && task_name_ == "relocate" ? kArmPreRoll : kPreRoll);
+  const bool arm_to_hold_up = variant_.pneumatic && task_name_ == "relocate";
+  p.release = robot_->data()->time + (arm_to_hold_up ? kArmPreRoll : kPreRoll);
   p.sequence = p.release + (idle_first ? idle_ : 0.0);
   p.end = p.sequence + (task_name_ == "type" ? 1.5 * spec.keys.size() + 0.5 : duration_);
   closedLoop(spec, p, r);
